@@ -1,0 +1,197 @@
+//! Fusion stage process: pairs each disparity map with its left image (held zero-copy in
+//! shared memory until the map arrives), detects edges, keeps disparity at edges, and publishes
+//! ranges per window for every fast-path frame, filling windows the fast path cannot see from
+//! a fresh long-range result.
+
+use std::collections::VecDeque;
+use std::process::ExitCode;
+
+use hvs_fusion::{Canny, DepthModel, WindowRanger, fuse, merge_windows};
+use hvs_shared::clock::monotonic_ns;
+use hvs_shared::ipc::{ReceivedSample, TopicSubscriber};
+use hvs_shared::messages::{
+    MAX_RANGE_WINDOWS, RangeReport, RangeSource, RangeWindow, Sequenced, StereoFrame320x240,
+    StereoFrame640x480,
+};
+use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
+use hvs_shared::topics;
+
+/// Frames kept waiting for their disparity map (the topic allows 5 borrowed samples).
+const HELD_FRAMES: usize = 3;
+
+fn main() -> ExitCode {
+    run_stage("fusion", run)
+}
+
+/// The latest long-range ranges.
+struct HiRanges {
+    frame_id: u64,
+    capture_ns: u64,
+    windows: [RangeWindow; MAX_RANGE_WINDOWS],
+}
+
+/// Edge detection and ranging for one resolution, with its buffers.
+struct PathRanger {
+    canny: Canny,
+    ranger: WindowRanger,
+    edges: Vec<u8>,
+    fused: Vec<u16>,
+    depth: DepthModel,
+    source: RangeSource,
+}
+
+impl PathRanger {
+    fn new(width: usize, height: usize, rt: &StageRuntime, source: RangeSource) -> Self {
+        Self {
+            canny: Canny::new(),
+            ranger: WindowRanger::new(),
+            edges: vec![0; width * height],
+            fused: vec![0; width * height],
+            depth: DepthModel {
+                focal_px: rt.config.camera.focal_px(width),
+                baseline_m: rt.config.camera.baseline_m,
+            },
+            source,
+        }
+    }
+
+    /// Returns (windows, edge pixels, edge pixels with disparity).
+    fn ranges(
+        &mut self,
+        left: &[u8],
+        disparity_q8: &[u16],
+        width: usize,
+        height: usize,
+        rt: &StageRuntime,
+    ) -> ([RangeWindow; MAX_RANGE_WINDOWS], u32, u32) {
+        let f = &rt.config.fusion;
+        self.canny.detect(
+            left,
+            width,
+            height,
+            f.canny_low,
+            f.canny_high,
+            &mut self.edges,
+        );
+        let (edge_px, valid) = fuse(&self.edges, disparity_q8, &mut self.fused);
+        let windows = self.ranger.compute(
+            &self.fused,
+            width,
+            f.windows as usize,
+            self.depth,
+            f.statistic,
+            self.source,
+        );
+        (windows, edge_px, valid)
+    }
+}
+
+/// Moves every queued frame into `held`, keeping the newest `HELD_FRAMES`.
+fn hold_frames<T>(
+    sub: &TopicSubscriber<T>,
+    held: &mut VecDeque<ReceivedSample<T>>,
+) -> Result<(), StageError>
+where
+    T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Sequenced + 'static,
+{
+    sub.clear_events();
+    while let Some(s) = sub.receive()? {
+        if held.len() == HELD_FRAMES {
+            held.pop_front();
+        }
+        held.push_back(s);
+    }
+    Ok(())
+}
+
+fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
+    let frames_lo = rt.node.subscriber(&topics::FRAMES_LO, 2)?;
+    let frames_hi = rt.node.subscriber(&topics::FRAMES_HI, 2)?;
+    let disp_lo = rt.node.subscriber(&topics::DISPARITY_LO, 2)?;
+    let disp_hi = rt.node.subscriber(&topics::DISPARITY_HI, 1)?;
+    let mut ranges = rt.node.publisher(&topics::RANGES)?;
+    let mut held_lo: VecDeque<ReceivedSample<StereoFrame320x240>> = VecDeque::new();
+    let mut held_hi: VecDeque<ReceivedSample<StereoFrame640x480>> = VecDeque::new();
+    let mut lo_path = PathRanger::new(320, 240, rt, RangeSource::Lo);
+    let mut hi_path = PathRanger::new(640, 480, rt, RangeSource::Hi);
+    let mut latest_hi: Option<HiRanges> = None;
+    let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
+    let mut unpaired = 0u64;
+    rt.set_note(format!("{} windows", rt.config.fusion.windows));
+
+    let waitset = rt.waitset()?;
+    let lo_guard = waitset
+        .attach_notification(disp_lo.listener())
+        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let hi_guard = waitset
+        .attach_notification(disp_hi.listener())
+        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+
+    rt.run_loop(&waitset, |rt, id| {
+        if id.has_event_from(&hi_guard) {
+            disp_hi.clear_events();
+            hold_frames(&frames_hi, &mut held_hi)?;
+            if let Some(map) = disp_hi.receive_latest()? {
+                let m = map.payload();
+                match held_hi
+                    .iter()
+                    .find(|f| f.payload().header.frame_id == m.header.frame_id)
+                {
+                    Some(frame) => {
+                        let (windows, _, _) =
+                            hi_path.ranges(&frame.payload().left, &m.disparity_q8, 640, 480, rt);
+                        latest_hi = Some(HiRanges {
+                            frame_id: m.header.frame_id,
+                            capture_ns: m.header.capture_ns,
+                            windows,
+                        });
+                    }
+                    None => unpaired += 1,
+                }
+            }
+        }
+        if id.has_event_from(&lo_guard) {
+            disp_lo.clear_events();
+            hold_frames(&frames_lo, &mut held_lo)?;
+            while let Some(map) = disp_lo.receive()? {
+                let received_ns = monotonic_ns();
+                rt.count_in(1);
+                rt.set_drops(disp_lo.dropped() + unpaired);
+                let m = map.payload();
+                let Some(frame) = held_lo
+                    .iter()
+                    .find(|f| f.payload().header.frame_id == m.header.frame_id)
+                else {
+                    unpaired += 1;
+                    continue;
+                };
+                let (lo_windows, edge_px, valid_edge_px) =
+                    lo_path.ranges(&frame.payload().left, &m.disparity_q8, 320, 240, rt);
+                let hi = latest_hi
+                    .as_ref()
+                    .filter(|h| m.header.capture_ns.saturating_sub(h.capture_ns) <= hi_max_age_ns);
+                let mut sample = match ranges.loan() {
+                    Ok(s) => s,
+                    Err(e) => {
+                        rt.report_publish_error(&e);
+                        continue;
+                    }
+                };
+                *sample.payload_mut() = RangeReport {
+                    frame_id: m.header.frame_id,
+                    capture_ns: m.header.capture_ns,
+                    published_ns: monotonic_ns(),
+                    hi_frame_id: hi.map_or(0, |h| h.frame_id),
+                    hi_age_ns: hi.map_or(0, |h| m.header.capture_ns.saturating_sub(h.capture_ns)),
+                    window_count: rt.config.fusion.windows,
+                    edge_px,
+                    windows: merge_windows(&lo_windows, hi.map(|h| &h.windows)),
+                    valid_edge_px,
+                    reserved: 0,
+                };
+                rt.send_or_report(&mut ranges, sample, monotonic_ns() - received_ns);
+            }
+        }
+        Ok(LoopControl::Continue)
+    })
+}

@@ -1,0 +1,170 @@
+//! hvs stereo matching: disparity maps from grey stereo pairs, with no IPC.
+//!
+//! Every algorithm implements [`StereoMatcher`]; [`matcher_for`] builds the one a config
+//! names. Output is a disparity map of the left image in 1/256 px (`u16`, 0 = invalid), the
+//! KITTI convention also used on the wire ([`hvs_shared::messages::DISPARITY_SCALE`]).
+//! Convention: a left pixel `(x, y)` with disparity `d` matches the right pixel `(x - d, y)`.
+
+pub mod block;
+pub mod equalize;
+
+use hvs_shared::config::StereoConfig;
+use hvs_shared::messages::StereoAlgorithm;
+
+pub use block::{BlockMatcher, BlockParams};
+
+/// A borrowed grey image, row-major, one byte per pixel, no row padding.
+#[derive(Debug, Clone, Copy)]
+pub struct ImageView<'a> {
+    /// Pixels, `width * height` bytes.
+    pub data: &'a [u8],
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+}
+
+impl<'a> ImageView<'a> {
+    /// Wraps `data`, checking that it holds `width * height` pixels.
+    pub fn new(data: &'a [u8], width: usize, height: usize) -> Result<Self, StereoError> {
+        if data.len() != width * height {
+            return Err(StereoError::BufferSize {
+                what: "image",
+                expected: width * height,
+                actual: data.len(),
+            });
+        }
+        Ok(Self {
+            data,
+            width,
+            height,
+        })
+    }
+
+    /// Row `y` as a slice.
+    pub fn row(&self, y: usize) -> &'a [u8] {
+        &self.data[y * self.width..(y + 1) * self.width]
+    }
+}
+
+/// Why a disparity map could not be computed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum StereoError {
+    /// Left and right images differ in size.
+    #[error("left image is {left_w}x{left_h} but right image is {right_w}x{right_h}")]
+    SizeMismatch {
+        /// Left width.
+        left_w: usize,
+        /// Left height.
+        left_h: usize,
+        /// Right width.
+        right_w: usize,
+        /// Right height.
+        right_h: usize,
+    },
+    /// A buffer does not hold the expected number of elements.
+    #[error("{what} buffer holds {actual} elements, expected {expected}")]
+    BufferSize {
+        /// Which buffer.
+        what: &'static str,
+        /// Expected length.
+        expected: usize,
+        /// Actual length.
+        actual: usize,
+    },
+    /// The disparity range is empty or inverted.
+    #[error("max disparity {max} must be above min disparity {min}")]
+    BadRange {
+        /// Smallest disparity.
+        min: u32,
+        /// Largest disparity.
+        max: u32,
+    },
+    /// The image is too small for the disparity range and window.
+    #[error(
+        "image {width}x{height} is too small for disparities up to {max_disp} with a {window}x{window} window"
+    )]
+    ImageTooSmall {
+        /// Width.
+        width: usize,
+        /// Height.
+        height: usize,
+        /// Largest disparity.
+        max_disp: u32,
+        /// Window size.
+        window: u32,
+    },
+    /// A parameter is out of its range.
+    #[error("{0}")]
+    BadParameter(String),
+    /// The algorithm is not available in this build.
+    #[error("stereo algorithm `{0}` is not implemented yet")]
+    Unsupported(&'static str),
+}
+
+/// Statistics of one computed map.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MatchStats {
+    /// Pixels with a valid disparity.
+    pub valid_px: u32,
+}
+
+/// A stereo algorithm.
+pub trait StereoMatcher: Send {
+    /// Which algorithm this is.
+    fn algorithm(&self) -> StereoAlgorithm;
+
+    /// Computes the disparity of every left pixel into `out_q8` (`width * height`, 1/256 px,
+    /// 0 = invalid).
+    fn compute(
+        &mut self,
+        left: ImageView<'_>,
+        right: ImageView<'_>,
+        out_q8: &mut [u16],
+    ) -> Result<MatchStats, StereoError>;
+}
+
+/// Checks that a pair and an output buffer agree in size.
+pub fn check_pair(
+    left: &ImageView<'_>,
+    right: &ImageView<'_>,
+    out_len: usize,
+) -> Result<(), StereoError> {
+    if left.width != right.width || left.height != right.height {
+        return Err(StereoError::SizeMismatch {
+            left_w: left.width,
+            left_h: left.height,
+            right_w: right.width,
+            right_h: right.height,
+        });
+    }
+    let n = left.width * left.height;
+    if out_len != n {
+        return Err(StereoError::BufferSize {
+            what: "disparity output",
+            expected: n,
+            actual: out_len,
+        });
+    }
+    Ok(())
+}
+
+/// Builds the matcher a stereo config section describes.
+pub fn matcher_for(config: &StereoConfig) -> Result<Box<dyn StereoMatcher>, StereoError> {
+    let params = BlockParams {
+        min_disp: config.min_disp,
+        max_disp: config.max_disp,
+        window: config.window,
+        equalize: config.equalize,
+        ..BlockParams::default()
+    };
+    match config.algorithm {
+        StereoAlgorithm::BmSad => Ok(Box::new(BlockMatcher::new(params)?)),
+        other => Err(StereoError::Unsupported(other.name())),
+    }
+}
+
+/// Converts a disparity in 1/256 px to pixels (`None` for the invalid marker 0).
+pub fn q8_to_px(q8: u16) -> Option<f32> {
+    (q8 != 0).then(|| q8 as f32 / hvs_shared::messages::DISPARITY_SCALE)
+}

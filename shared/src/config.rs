@@ -1,0 +1,917 @@
+//! The hvs configuration file (TOML), shared by the supervisor and every stage.
+//!
+//! One file describes the whole pipeline; every process loads and validates all of it, so a
+//! mistake is reported the same way wherever it is found. Unknown keys are errors (a typo must
+//! not silently fall back to a default), and every error names the file and the key at fault.
+//! Relative paths inside the file are resolved against the file's own directory.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::messages::StereoAlgorithm;
+
+/// Why a configuration could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or does not match the schema (unknown key, wrong type).
+    #[error("config file {path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The parser's message, with line, column and key.
+        message: String,
+    },
+    /// A value is out of range or inconsistent with another.
+    #[error("config file {path}: `{key}` {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// Dotted key at fault, e.g. `stereo.lo.max_disp`.
+        key: String,
+        /// What is wrong with it.
+        message: String,
+    },
+}
+
+/// The stages the supervisor knows, in start order.
+pub const STAGE_NAMES: [&str; 7] = [
+    "sim",
+    "capture",
+    "stereo-lo",
+    "stereo-hi",
+    "fusion",
+    "decision",
+    "actuator",
+];
+
+/// The whole configuration.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct HvsConfig {
+    /// Instance name: every service lives under `hvs/<instance>/`, so two pipelines (or
+    /// parallel tests) never see each other. `[A-Za-z0-9_-]`, at most 32 characters.
+    #[serde(default = "default_instance")]
+    pub instance: String,
+    /// Supervisor timing.
+    #[serde(default)]
+    pub supervisor: SupervisorConfig,
+    /// Camera geometry and rate.
+    #[serde(default)]
+    pub camera: CameraConfig,
+    /// Where frames come from.
+    #[serde(default)]
+    pub capture: CaptureConfig,
+    /// Stereo matching for both paths.
+    #[serde(default)]
+    pub stereo: StereoPaths,
+    /// Edges, fused map and ranges.
+    #[serde(default)]
+    pub fusion: FusionConfig,
+    /// Walls, intersections and navigation.
+    #[serde(default)]
+    pub decision: DecisionConfig,
+    /// The servo-controller link.
+    #[serde(default)]
+    pub actuator: ActuatorConfig,
+    /// The simulated world.
+    #[serde(default)]
+    pub sim: SimConfig,
+    /// Per-stage process settings, keyed by stage name (see [`STAGE_NAMES`]).
+    #[serde(default)]
+    pub stages: BTreeMap<String, StageOverride>,
+    /// The file this configuration was loaded from (not part of the TOML).
+    #[serde(skip)]
+    pub source_path: PathBuf,
+}
+
+fn default_instance() -> String {
+    "default".into()
+}
+
+/// Supervisor timing.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SupervisorConfig {
+    /// A running stage that has not sent a heartbeat for this long is declared hung and killed.
+    pub heartbeat_timeout_ms: u64,
+    /// A new stage gets this long to send its first heartbeat.
+    pub startup_timeout_ms: u64,
+    /// Period of the status line and of the status topic.
+    pub status_period_ms: u64,
+    /// Grace time between SIGTERM and SIGKILL when stopping a stage.
+    pub stop_timeout_ms: u64,
+    /// Folder holding the stage binaries (default: the folder of the `hvs` executable).
+    pub bin_dir: Option<PathBuf>,
+}
+
+impl Default for SupervisorConfig {
+    fn default() -> Self {
+        Self {
+            heartbeat_timeout_ms: 1000,
+            startup_timeout_ms: 10_000,
+            status_period_ms: 1000,
+            stop_timeout_ms: 2000,
+            bin_dir: None,
+        }
+    }
+}
+
+/// Camera geometry and rate.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraConfig {
+    /// Frame rate, Hz.
+    pub fps: f64,
+    /// Focal length at 320x240 in pixels (doubled at 640x480).
+    pub focal_px_320: f64,
+    /// Stereo baseline in metres.
+    pub baseline_m: f64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            fps: 30.0,
+            focal_px_320: 320.0,
+            baseline_m: 0.060,
+        }
+    }
+}
+
+impl CameraConfig {
+    /// Focal length in pixels at an image `width` (scaled from the 320x240 value).
+    pub fn focal_px(&self, width: usize) -> f64 {
+        self.focal_px_320 * width as f64 / 320.0
+    }
+}
+
+/// Frame sources.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CaptureSource {
+    /// The built-in simulator's rendered camera (topic `sim/camera/640x480`).
+    Sim,
+}
+
+/// Where frames come from.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CaptureConfig {
+    /// The frame source.
+    pub source: CaptureSource,
+}
+
+impl Default for CaptureConfig {
+    fn default() -> Self {
+        Self {
+            source: CaptureSource::Sim,
+        }
+    }
+}
+
+/// Stereo settings of both paths.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StereoPaths {
+    /// The 320x240 fast path.
+    pub lo: StereoConfig,
+    /// The 640x480 long-range path.
+    pub hi: StereoConfig,
+}
+
+impl Default for StereoPaths {
+    fn default() -> Self {
+        Self {
+            lo: StereoConfig {
+                min_disp: 9,
+                max_disp: 55,
+                ..StereoConfig::default()
+            },
+            hi: StereoConfig {
+                min_disp: 18,
+                max_disp: 110,
+                ..StereoConfig::default()
+            },
+        }
+    }
+}
+
+/// Stereo settings of one path.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StereoConfig {
+    /// The matching algorithm.
+    pub algorithm: StereoAlgorithm,
+    /// Smallest disparity searched, px.
+    pub min_disp: u32,
+    /// Largest disparity searched, px (inclusive).
+    pub max_disp: u32,
+    /// Block size for block matching (odd).
+    pub window: u32,
+    /// Scale the right image so its mean equals the left's before matching (reference step 2).
+    pub equalize: bool,
+}
+
+impl Default for StereoConfig {
+    fn default() -> Self {
+        Self {
+            algorithm: StereoAlgorithm::BmSad,
+            min_disp: 9,
+            max_disp: 55,
+            window: 9,
+            equalize: true,
+        }
+    }
+}
+
+/// Range statistic over a window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RangeStatistic {
+    /// Mean of the edge pixels' ranges (the reference).
+    Mean,
+    /// Median.
+    Median,
+}
+
+/// Edges, fused map and ranges.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FusionConfig {
+    /// Canny low threshold on the gradient magnitude (|gx| + |gy| of a 3x3 Sobel).
+    pub canny_low: u32,
+    /// Canny high threshold.
+    pub canny_high: u32,
+    /// Number of vertical windows: 3 or 5.
+    pub windows: u32,
+    /// Statistic reported as `range_m`.
+    pub statistic: RangeStatistic,
+    /// A 640x480 result older than this (relative to the fast-path frame) is not fused.
+    pub hi_max_age_ms: u64,
+}
+
+impl Default for FusionConfig {
+    fn default() -> Self {
+        Self {
+            canny_low: 60,
+            canny_high: 150,
+            windows: 3,
+            statistic: RangeStatistic::Mean,
+            hi_max_age_ms: 300,
+        }
+    }
+}
+
+/// Wall thresholds for one resolution.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallThresholds {
+    /// Side wall present when the side range is below this, metres (reference `a`).
+    pub side_m: f64,
+    /// Front wall present when the middle range is below this, metres (reference `b`).
+    pub front_m: f64,
+}
+
+/// Feet to metres.
+pub const M_PER_FT: f64 = 0.3048;
+
+/// Walls, intersections and navigation.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DecisionConfig {
+    /// Thresholds for the 320x240 ranges (reference: a = 2.35 ft, b = 2.4 ft).
+    pub lo: WallThresholds,
+    /// Thresholds for the 640x480 ranges (reference: a = 6.5 ft, b = 7 ft).
+    pub hi: WallThresholds,
+}
+
+impl Default for DecisionConfig {
+    fn default() -> Self {
+        Self {
+            lo: WallThresholds {
+                side_m: 2.35 * M_PER_FT,
+                front_m: 2.4 * M_PER_FT,
+            },
+            hi: WallThresholds {
+                side_m: 6.5 * M_PER_FT,
+                front_m: 7.0 * M_PER_FT,
+            },
+        }
+    }
+}
+
+/// Left/right pulse widths of one motion, in PSC units of 2 us.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PulsePair {
+    /// Left wheels.
+    pub left: u16,
+    /// Right wheels.
+    pub right: u16,
+}
+
+/// The motion table: pulse widths per motion (reference values measured on the robot).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PulseTable {
+    /// Wheels stopped.
+    pub neutral: PulsePair,
+    /// Straight ahead.
+    pub forward: PulsePair,
+    /// Turn left.
+    pub left: PulsePair,
+    /// Turn right.
+    pub right: PulsePair,
+    /// Back up.
+    pub reverse: PulsePair,
+}
+
+impl Default for PulseTable {
+    fn default() -> Self {
+        Self {
+            neutral: PulsePair {
+                left: 760,
+                right: 758,
+            },
+            forward: PulsePair {
+                left: 720,
+                right: 800,
+            },
+            left: PulsePair {
+                left: 920,
+                right: 840,
+            },
+            right: PulsePair {
+                left: 600,
+                right: 510,
+            },
+            reverse: PulsePair {
+                left: 800,
+                right: 716,
+            },
+        }
+    }
+}
+
+/// The servo-controller link.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ActuatorConfig {
+    /// Serial device, e.g. `/dev/ttyUSB0`; `sim` means the simulator's pty for this instance.
+    pub device: String,
+    /// Baud rate: the PSC speaks 2400 (or 38400).
+    pub baud: u32,
+    /// Neutral is sent when the newest decision is older than this.
+    pub watchdog_ms: u64,
+    /// PSC channel of the left wheels.
+    pub left_channel: u8,
+    /// PSC channel of the right wheels.
+    pub right_channel: u8,
+    /// Pulse widths per motion.
+    pub pulses: PulseTable,
+    /// Ask `!SCVER?` when the link opens and require an answer.
+    pub link_check: bool,
+}
+
+impl Default for ActuatorConfig {
+    fn default() -> Self {
+        Self {
+            device: "sim".into(),
+            baud: 2400,
+            watchdog_ms: 300,
+            left_channel: 1,
+            right_channel: 5,
+            pulses: PulseTable::default(),
+            link_check: true,
+        }
+    }
+}
+
+/// Webcam defects the simulator can add.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimDefects {
+    /// Gain applied to the right image.
+    pub gain: f32,
+    /// Offset added to the right image, grey levels.
+    pub offset: f32,
+    /// Gaussian noise on both images, grey levels (sigma).
+    pub noise_sigma: f32,
+    /// Vertical misalignment of the right image, px.
+    pub vertical_shift_px: i32,
+    /// The right image is taken this much later than the left, ms (unsynchronised capture).
+    pub right_delay_ms: f64,
+}
+
+impl Default for SimDefects {
+    fn default() -> Self {
+        Self {
+            gain: 1.0,
+            offset: 0.0,
+            noise_sigma: 0.0,
+            vertical_shift_px: 0,
+            right_delay_ms: 0.0,
+        }
+    }
+}
+
+/// The simulated world.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimConfig {
+    /// Map file (relative to the config file).
+    pub map: PathBuf,
+    /// Random seed for noise.
+    pub seed: u64,
+    /// Webcam defects.
+    pub defects: SimDefects,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            map: PathBuf::from("maps/maze.txt"),
+            seed: 1,
+            defects: SimDefects::default(),
+        }
+    }
+}
+
+/// When the supervisor restarts a stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RestartPolicy {
+    /// After any exit or hang.
+    Always,
+    /// After a non-zero exit, a signal or a hang; a clean exit stays stopped.
+    OnFailure,
+    /// Never.
+    Never,
+}
+
+/// Per-stage settings in `[stages.<name>]`; every field is optional.
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageOverride {
+    /// Start this stage at all.
+    pub enabled: Option<bool>,
+    /// Restart policy.
+    pub restart: Option<RestartPolicy>,
+    /// Program to run (a path, or a name looked up in the supervisor's bin dir).
+    pub program: Option<String>,
+    /// Extra arguments appended to the standard ones.
+    pub args: Option<Vec<String>>,
+    /// First restart delay, ms (doubles after each failure).
+    pub backoff_ms: Option<u64>,
+    /// Largest restart delay, ms.
+    pub max_backoff_ms: Option<u64>,
+    /// Give up after this many restarts within `restart_window_s`.
+    pub max_restarts: Option<u32>,
+    /// Window for `max_restarts`, seconds.
+    pub restart_window_s: Option<u64>,
+    /// CPU niceness of the process (-20..=19; higher = lower priority). The 640x480 worker
+    /// defaults to 10 so that it only uses what the fast path leaves.
+    pub nice: Option<i32>,
+}
+
+/// A stage's resolved process settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StageSpec {
+    /// Stage name (one of [`STAGE_NAMES`]).
+    pub name: String,
+    /// Program name or path.
+    pub program: String,
+    /// Extra arguments.
+    pub args: Vec<String>,
+    /// Whether it is started.
+    pub enabled: bool,
+    /// Restart policy.
+    pub restart: RestartPolicy,
+    /// First restart delay, ms.
+    pub backoff_ms: u64,
+    /// Largest restart delay, ms.
+    pub max_backoff_ms: u64,
+    /// Restart budget within the window.
+    pub max_restarts: u32,
+    /// Window for the restart budget, seconds.
+    pub restart_window_s: u64,
+    /// CPU niceness.
+    pub nice: i32,
+}
+
+/// The binary that runs a stage by default.
+pub fn default_program(stage: &str) -> &'static str {
+    match stage {
+        "sim" => "hvs-sim",
+        "capture" => "hvs-capture",
+        "stereo-lo" | "stereo-hi" => "hvs-stereo",
+        "fusion" => "hvs-fusion",
+        "decision" => "hvs-decision",
+        _ => "hvs-actuator",
+    }
+}
+
+impl HvsConfig {
+    /// Reads, parses and validates a config file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates config text; `path` is used for messages and relative paths.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let mut config: HvsConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string().trim_end().to_string(),
+        })?;
+        config.source_path = path.to_path_buf();
+        config.validate()?;
+        Ok(config)
+    }
+
+    fn invalid(&self, key: &str, message: impl Into<String>) -> ConfigError {
+        ConfigError::Invalid {
+            path: self.source_path.clone(),
+            key: key.into(),
+            message: message.into(),
+        }
+    }
+
+    /// Checks ranges and cross-field consistency.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if let Err(message) = validate_instance_name(&self.instance) {
+            return Err(self.invalid("instance", message));
+        }
+        let s = &self.supervisor;
+        for (key, value) in [
+            ("supervisor.heartbeat_timeout_ms", s.heartbeat_timeout_ms),
+            ("supervisor.startup_timeout_ms", s.startup_timeout_ms),
+            ("supervisor.status_period_ms", s.status_period_ms),
+            ("supervisor.stop_timeout_ms", s.stop_timeout_ms),
+        ] {
+            if value < 100 {
+                return Err(self.invalid(key, format!("= {value} is too short (minimum 100)")));
+            }
+        }
+        let c = &self.camera;
+        if !(c.fps > 0.0 && c.fps <= 120.0) {
+            return Err(self.invalid("camera.fps", format!("= {} must be in (0, 120]", c.fps)));
+        }
+        if !(c.focal_px_320 > 10.0 && c.focal_px_320 < 10_000.0) {
+            return Err(self.invalid(
+                "camera.focal_px_320",
+                format!("= {} must be in (10, 10000)", c.focal_px_320),
+            ));
+        }
+        if !(c.baseline_m > 0.001 && c.baseline_m < 2.0) {
+            return Err(self.invalid(
+                "camera.baseline_m",
+                format!("= {} must be in (0.001, 2) metres", c.baseline_m),
+            ));
+        }
+        for (key, cfg, width) in [
+            ("stereo.lo", &self.stereo.lo, 320),
+            ("stereo.hi", &self.stereo.hi, 640),
+        ] {
+            if cfg.max_disp <= cfg.min_disp {
+                return Err(self.invalid(
+                    &format!("{key}.max_disp"),
+                    format!(
+                        "= {} must be above min_disp = {}",
+                        cfg.max_disp, cfg.min_disp
+                    ),
+                ));
+            }
+            if cfg.max_disp as usize >= width / 2 {
+                return Err(self.invalid(
+                    &format!("{key}.max_disp"),
+                    format!(
+                        "= {} leaves too little image at width {width}",
+                        cfg.max_disp
+                    ),
+                ));
+            }
+            if cfg.window % 2 == 0 || !(3..=31).contains(&cfg.window) {
+                return Err(self.invalid(
+                    &format!("{key}.window"),
+                    format!("= {} must be odd and in 3..=31", cfg.window),
+                ));
+            }
+        }
+        let f = &self.fusion;
+        if f.windows != 3 && f.windows != 5 {
+            return Err(self.invalid("fusion.windows", format!("= {} must be 3 or 5", f.windows)));
+        }
+        if f.canny_low >= f.canny_high {
+            return Err(self.invalid(
+                "fusion.canny_low",
+                format!(
+                    "= {} must be below canny_high = {}",
+                    f.canny_low, f.canny_high
+                ),
+            ));
+        }
+        for (key, t) in [
+            ("decision.lo", self.decision.lo),
+            ("decision.hi", self.decision.hi),
+        ] {
+            if !(t.side_m > 0.0 && t.front_m > 0.0) {
+                return Err(self.invalid(key, "thresholds must be positive metres"));
+            }
+        }
+        let a = &self.actuator;
+        if a.device.is_empty() {
+            return Err(self.invalid("actuator.device", "must name a serial device or `sim`"));
+        }
+        if !matches!(a.baud, 2400 | 38400) {
+            return Err(self.invalid(
+                "actuator.baud",
+                format!("= {} is not a PSC rate (2400 or 38400)", a.baud),
+            ));
+        }
+        if !(50..=5000).contains(&a.watchdog_ms) {
+            return Err(self.invalid(
+                "actuator.watchdog_ms",
+                format!("= {} must be in 50..=5000", a.watchdog_ms),
+            ));
+        }
+        for (key, ch) in [
+            ("actuator.left_channel", a.left_channel),
+            ("actuator.right_channel", a.right_channel),
+        ] {
+            if ch > 15 {
+                return Err(self.invalid(key, format!("= {ch} is not a PSC channel (0..=15)")));
+            }
+        }
+        if a.left_channel == a.right_channel {
+            return Err(self.invalid("actuator.right_channel", "must differ from left_channel"));
+        }
+        let p = &a.pulses;
+        for (name, pair) in [
+            ("neutral", p.neutral),
+            ("forward", p.forward),
+            ("left", p.left),
+            ("right", p.right),
+            ("reverse", p.reverse),
+        ] {
+            for (side, pw) in [("left", pair.left), ("right", pair.right)] {
+                if !(250..=1250).contains(&pw) {
+                    return Err(self.invalid(
+                        &format!("actuator.pulses.{name}.{side}"),
+                        format!("= {pw} is outside the PSC range 250..=1250"),
+                    ));
+                }
+            }
+        }
+        let d = &self.sim.defects;
+        if !(d.gain > 0.0 && d.gain < 4.0) {
+            return Err(self.invalid(
+                "sim.defects.gain",
+                format!("= {} must be in (0, 4)", d.gain),
+            ));
+        }
+        if !(0.0..=64.0).contains(&d.noise_sigma) {
+            return Err(self.invalid(
+                "sim.defects.noise_sigma",
+                format!("= {} must be in 0..=64", d.noise_sigma),
+            ));
+        }
+        if d.vertical_shift_px.abs() > 8 {
+            return Err(self.invalid(
+                "sim.defects.vertical_shift_px",
+                format!("= {} must be within +-8", d.vertical_shift_px),
+            ));
+        }
+        if !(0.0..=1000.0).contains(&d.right_delay_ms) {
+            return Err(self.invalid(
+                "sim.defects.right_delay_ms",
+                format!("= {} must be in 0..=1000", d.right_delay_ms),
+            ));
+        }
+        for (name, o) in &self.stages {
+            if !STAGE_NAMES.contains(&name.as_str()) {
+                return Err(self.invalid(
+                    &format!("stages.{name}"),
+                    format!("is not a stage; known stages: {}", STAGE_NAMES.join(", ")),
+                ));
+            }
+            if let Some(p) = &o.program
+                && p.trim().is_empty()
+            {
+                return Err(self.invalid(&format!("stages.{name}.program"), "is empty"));
+            }
+            if let Some(n) = o.nice
+                && !(-20..=19).contains(&n)
+            {
+                return Err(self.invalid(
+                    &format!("stages.{name}.nice"),
+                    format!("= {n} must be in -20..=19"),
+                ));
+            }
+            if o.max_restarts == Some(0) && o.restart.is_some_and(|r| r != RestartPolicy::Never) {
+                return Err(self.invalid(
+                    &format!("stages.{name}.max_restarts"),
+                    "= 0 contradicts a restart policy; use restart = \"never\"",
+                ));
+            }
+        }
+        if self.stage_enabled("sim") {
+            let map = self.resolve_path(&self.sim.map);
+            if !map.is_file() {
+                return Err(self.invalid(
+                    "sim.map",
+                    format!("names a map file that does not exist: {}", map.display()),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Resolves a path from the file against the file's directory.
+    pub fn resolve_path(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            return p.to_path_buf();
+        }
+        let base = self.source_path.parent().unwrap_or(Path::new("."));
+        base.join(p)
+    }
+
+    /// Whether a stage is enabled (default: all, and `sim` only with the sim capture source).
+    pub fn stage_enabled(&self, stage: &str) -> bool {
+        let default = stage != "sim" || self.capture.source == CaptureSource::Sim;
+        self.stages
+            .get(stage)
+            .and_then(|o| o.enabled)
+            .unwrap_or(default)
+    }
+
+    /// The resolved process settings of every known stage, in start order.
+    pub fn stage_specs(&self) -> Vec<StageSpec> {
+        STAGE_NAMES
+            .iter()
+            .map(|&name| {
+                let o = self.stages.get(name).cloned().unwrap_or_default();
+                StageSpec {
+                    name: name.to_string(),
+                    program: o
+                        .program
+                        .unwrap_or_else(|| default_program(name).to_string()),
+                    args: o.args.unwrap_or_default(),
+                    enabled: self.stage_enabled(name),
+                    restart: o.restart.unwrap_or(RestartPolicy::Always),
+                    backoff_ms: o.backoff_ms.unwrap_or(200),
+                    max_backoff_ms: o.max_backoff_ms.unwrap_or(5000),
+                    max_restarts: o.max_restarts.unwrap_or(10),
+                    restart_window_s: o.restart_window_s.unwrap_or(60),
+                    nice: o.nice.unwrap_or(if name == "stereo-hi" { 10 } else { 0 }),
+                }
+            })
+            .collect()
+    }
+
+    /// The stereo settings for a stage name (`stereo-lo` or `stereo-hi`).
+    pub fn stereo_for(&self, stage: &str) -> Option<&StereoConfig> {
+        match stage {
+            "stereo-lo" => Some(&self.stereo.lo),
+            "stereo-hi" => Some(&self.stereo.hi),
+            _ => None,
+        }
+    }
+}
+
+/// Checks an instance name: `[A-Za-z0-9_-]`, 1 to 32 characters.
+pub fn validate_instance_name(name: &str) -> Result<(), String> {
+    if name.is_empty() || name.len() > 32 {
+        return Err(format!("= {name:?} must have 1 to 32 characters"));
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_'))
+    {
+        return Err(format!(
+            "= {name:?} contains {c:?}; use letters, digits, '-' and '_'"
+        ));
+    }
+    Ok(())
+}
+
+/// Per-instance run folder for files that are not shared memory (the simulator's pty link,
+/// the supervisor lock): `$HVS_RUN_DIR/<instance>` or `/tmp/hvs-<uid>/<instance>`.
+pub fn run_dir(instance: &str) -> PathBuf {
+    let base = std::env::var_os("HVS_RUN_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(format!("/tmp/hvs-{}", nix::unistd::getuid())));
+    base.join(instance)
+}
+
+/// Path of the simulator's pty link for an instance (what `actuator.device = "sim"` opens).
+pub fn sim_pty_path(instance: &str) -> PathBuf {
+    run_dir(instance).join("psc-sim")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<HvsConfig, ConfigError> {
+        // Disable the sim so the map file need not exist for schema tests.
+        let text = format!("{text}\n[stages.sim]\nenabled = false\n");
+        HvsConfig::parse(&text, Path::new("/nonexistent/test.toml"))
+    }
+
+    #[test]
+    fn empty_file_gives_defaults() {
+        let c = parse("").expect("defaults are valid");
+        assert_eq!(c.instance, "default");
+        assert_eq!(c.stereo.lo.min_disp, 9);
+        assert_eq!(c.stereo.hi.max_disp, 110);
+        assert!((c.decision.lo.side_m - 0.71628).abs() < 1e-6);
+        assert_eq!(c.stage_specs().len(), STAGE_NAMES.len());
+    }
+
+    #[test]
+    fn unknown_key_is_named_with_its_line() {
+        let err = parse("[stereo.lo]\nmin_disp = 9\nmax_dsip = 55\n").unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("max_dsip"), "{msg}");
+        assert!(msg.contains("line 3"), "{msg}");
+        assert!(msg.contains("/nonexistent/test.toml"), "{msg}");
+    }
+
+    #[test]
+    fn wrong_type_is_named() {
+        let err = parse("[camera]\nfps = \"fast\"\n").unwrap_err().to_string();
+        assert!(err.contains("fps"), "{err}");
+        assert!(err.contains("line 2"), "{err}");
+    }
+
+    #[test]
+    fn max_disp_not_above_min_disp_is_rejected() {
+        let err = parse("[stereo.hi]\nmin_disp = 40\nmax_disp = 40\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("stereo.hi.max_disp"), "{err}");
+    }
+
+    #[test]
+    fn unknown_stage_is_rejected() {
+        let err = parse("[stages.stero-lo]\nrestart = \"never\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("stages.stero-lo"), "{err}");
+        assert!(err.contains("stereo-lo"), "{err}");
+    }
+
+    #[test]
+    fn missing_map_file_is_named() {
+        let err = HvsConfig::parse(
+            "[sim]\nmap = \"maps/nope.txt\"\n",
+            Path::new("/nonexistent/dir/sim.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("sim.map"), "{err}");
+        assert!(err.contains("/nonexistent/dir/maps/nope.txt"), "{err}");
+    }
+
+    #[test]
+    fn bad_instance_name_is_rejected() {
+        let err = parse("instance = \"a/b\"").unwrap_err().to_string();
+        assert!(err.contains("instance"), "{err}");
+    }
+
+    #[test]
+    fn pulses_outside_psc_range_are_rejected() {
+        let err = parse("[actuator.pulses.forward]\nleft = 100\nright = 800\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("actuator.pulses.forward.left"), "{err}");
+    }
+
+    #[test]
+    fn stage_overrides_apply() {
+        let c = parse("[stages.fusion]\nrestart = \"on-failure\"\nmax_restarts = 2\n").unwrap();
+        let fusion = c
+            .stage_specs()
+            .into_iter()
+            .find(|s| s.name == "fusion")
+            .unwrap();
+        assert_eq!(fusion.restart, RestartPolicy::OnFailure);
+        assert_eq!(fusion.max_restarts, 2);
+        assert!(!c.stage_enabled("sim"));
+    }
+}

@@ -1,0 +1,915 @@
+//! Message payloads exchanged between the hvs processes.
+//!
+//! Every payload is a fixed-size `#[repr(C)]` struct with no padding (checked at compile time by
+//! `bytemuck::Pod`), written in place into an iceoryx2 shared-memory sample and never serialised.
+//! Each carries an explicit iceoryx2 type name (`hvs::...`) so that a C, C++ or Python iceoryx2
+//! client can open the service by name and read the bytes; `docs/ipc.md` documents the layout
+//! field by field, and the tests in this module pin the sizes and offsets it states.
+//!
+//! Conventions: times are `CLOCK_MONOTONIC` nanoseconds (`*_ns`), distances metres (`*_m`),
+//! disparities in 1/256 px (`*_q8`, 0 = invalid, the KITTI convention), enums are `u32` codes
+//! (see the `*::from_code` helpers), text is NUL-padded UTF-8 in fixed byte arrays.
+
+use bytemuck::{Pod, Zeroable};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Width of the fast-path (low-resolution) images in pixels.
+pub const LO_WIDTH: usize = 320;
+/// Height of the fast-path (low-resolution) images in pixels.
+pub const LO_HEIGHT: usize = 240;
+/// Pixel count of one fast-path image.
+pub const LO_PIXELS: usize = LO_WIDTH * LO_HEIGHT;
+/// Width of the long-range (high-resolution) images in pixels.
+pub const HI_WIDTH: usize = 640;
+/// Height of the long-range (high-resolution) images in pixels.
+pub const HI_HEIGHT: usize = 480;
+/// Pixel count of one long-range image.
+pub const HI_PIXELS: usize = HI_WIDTH * HI_HEIGHT;
+/// Fixed-point scale of disparities in [`DisparityMap320x240`] and [`DisparityMap640x480`]:
+/// stored value = disparity in px x 256; 0 = invalid.
+pub const DISPARITY_SCALE: f32 = 256.0;
+/// Number of range windows a [`RangeReport`] can hold.
+pub const MAX_RANGE_WINDOWS: usize = 5;
+/// Length of the fixed name fields (stage names).
+pub const NAME_LEN: usize = 32;
+/// Maximum number of stages a [`SupervisorStatus`] lists.
+pub const MAX_STAGES: usize = 12;
+
+/// Encodes `name` into a NUL-padded fixed array, truncating at a UTF-8 boundary if too long.
+pub fn encode_name<const N: usize>(name: &str) -> [u8; N] {
+    let mut out = [0u8; N];
+    let mut len = name.len().min(N);
+    while !name.is_char_boundary(len) {
+        len -= 1;
+    }
+    out[..len].copy_from_slice(&name.as_bytes()[..len]);
+    out
+}
+
+/// Decodes a NUL-padded fixed array written by [`encode_name`]; invalid UTF-8 yields `"?"`.
+pub fn decode_name(bytes: &[u8]) -> &str {
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    core::str::from_utf8(&bytes[..end]).unwrap_or("?")
+}
+
+/// Payloads that carry a monotonically increasing sequence number (frame id or heartbeat
+/// counter); subscribers use it to count samples lost to overflow.
+pub trait Sequenced {
+    /// The sequence number of this sample.
+    fn sequence(&self) -> u64;
+}
+
+/// Where a frame pair came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum FrameSource {
+    /// Rendered by the built-in simulator.
+    Simulator = 1,
+    /// Two V4L2 devices (the Minoru webcam).
+    V4l2 = 2,
+    /// A folder of left/right PNG pairs.
+    Files = 3,
+    /// An MCAP recording being replayed.
+    Replay = 4,
+}
+
+impl FrameSource {
+    /// Decodes a `source` code; `None` for unknown codes.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            1 => Some(Self::Simulator),
+            2 => Some(Self::V4l2),
+            3 => Some(Self::Files),
+            4 => Some(Self::Replay),
+            _ => None,
+        }
+    }
+}
+
+/// Header of a stereo frame pair (64 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::FrameHeader")]
+pub struct FrameHeader {
+    /// Capture counter; the 320x240 and 640x480 pairs of one capture share the id.
+    pub frame_id: u64,
+    /// Capture time of the pair (the left exposure), CLOCK_MONOTONIC ns.
+    pub capture_ns: u64,
+    /// Capture time of the left image, CLOCK_MONOTONIC ns.
+    pub left_capture_ns: u64,
+    /// Capture time of the right image, CLOCK_MONOTONIC ns.
+    pub right_capture_ns: u64,
+    /// Right minus left capture time in ns (the two webcams are not synchronised).
+    pub skew_ns: i64,
+    /// Time the capture stage published the pair, CLOCK_MONOTONIC ns.
+    pub published_ns: u64,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// [`FrameSource`] code.
+    pub source: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+
+macro_rules! stereo_frame {
+    ($name:ident, $type_name:literal, $w:expr, $h:expr, $doc:literal) => {
+        #[doc = $doc]
+        ///
+        /// Layout: a [`FrameHeader`] then the left and the right grey images, row-major,
+        /// one byte per pixel, no row padding.
+        #[repr(C)]
+        #[derive(Debug, Clone, Copy, Pod, Zeroable, ZeroCopySend)]
+        #[type_name($type_name)]
+        pub struct $name {
+            /// Frame metadata.
+            pub header: FrameHeader,
+            /// Left image, grey u8, row-major.
+            pub left: [u8; $w * $h],
+            /// Right image, grey u8, row-major.
+            pub right: [u8; $w * $h],
+        }
+
+        impl $name {
+            /// Image width in pixels.
+            pub const WIDTH: usize = $w;
+            /// Image height in pixels.
+            pub const HEIGHT: usize = $h;
+        }
+
+        impl Sequenced for $name {
+            fn sequence(&self) -> u64 {
+                self.header.frame_id
+            }
+        }
+    };
+}
+
+stereo_frame!(
+    StereoFrame320x240,
+    "hvs::StereoFrame320x240",
+    LO_WIDTH,
+    LO_HEIGHT,
+    "A 320x240 grey stereo pair: the fast path (153 664 bytes)."
+);
+stereo_frame!(
+    StereoFrame640x480,
+    "hvs::StereoFrame640x480",
+    HI_WIDTH,
+    HI_HEIGHT,
+    "A 640x480 grey stereo pair: the long-range path (614 464 bytes)."
+);
+
+/// Stereo algorithms (the `algorithm` code of a [`DisparityHeader`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+#[repr(u32)]
+pub enum StereoAlgorithm {
+    /// Block matching, sum of absolute differences.
+    BmSad = 1,
+    /// Block matching, sum of squared differences.
+    BmSsd = 2,
+    /// Block matching, normalised cross-correlation.
+    BmNcc = 3,
+    /// Block matching, census transform + Hamming distance.
+    BmCensus = 4,
+    /// Ogale & Aloimonos shape-and-stereo correspondence.
+    Ogale = 5,
+    /// Census cost + semi-global matching.
+    Sgm = 6,
+}
+
+impl StereoAlgorithm {
+    /// Every algorithm, in code order.
+    pub const ALL: [StereoAlgorithm; 6] = [
+        Self::BmSad,
+        Self::BmSsd,
+        Self::BmNcc,
+        Self::BmCensus,
+        Self::Ogale,
+        Self::Sgm,
+    ];
+
+    /// Decodes an `algorithm` code; `None` for unknown codes.
+    pub fn from_code(code: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|a| *a as u32 == code)
+    }
+
+    /// The name used in config files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::BmSad => "bm-sad",
+            Self::BmSsd => "bm-ssd",
+            Self::BmNcc => "bm-ncc",
+            Self::BmCensus => "bm-census",
+            Self::Ogale => "ogale",
+            Self::Sgm => "sgm",
+        }
+    }
+
+    /// Parses a config/CLI name such as `bm-sad`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|a| a.name() == name)
+    }
+}
+
+/// Header of a disparity map (64 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::DisparityHeader")]
+pub struct DisparityHeader {
+    /// Id of the frame pair this map was computed from.
+    pub frame_id: u64,
+    /// Capture time of that pair, CLOCK_MONOTONIC ns.
+    pub capture_ns: u64,
+    /// Time the stereo stage took the pair, CLOCK_MONOTONIC ns.
+    pub frame_received_ns: u64,
+    /// Time the map was published, CLOCK_MONOTONIC ns.
+    pub published_ns: u64,
+    /// Matching time for this map in ns.
+    pub compute_ns: u64,
+    /// Map width in pixels.
+    pub width: u32,
+    /// Map height in pixels.
+    pub height: u32,
+    /// Smallest disparity searched, px.
+    pub min_disp: u32,
+    /// Largest disparity searched, px.
+    pub max_disp: u32,
+    /// [`StereoAlgorithm`] code.
+    pub algorithm: u32,
+    /// Number of pixels with a valid disparity.
+    pub valid_px: u32,
+}
+
+macro_rules! disparity_map {
+    ($name:ident, $type_name:literal, $w:expr, $h:expr, $doc:literal) => {
+        #[doc = $doc]
+        ///
+        /// Layout: a [`DisparityHeader`] then `disparity_q8`, row-major u16 (little endian on
+        /// every supported target), disparity x 256 of each left-image pixel, 0 = invalid.
+        #[repr(C)]
+        #[derive(Debug, Clone, Copy, Pod, Zeroable, ZeroCopySend)]
+        #[type_name($type_name)]
+        pub struct $name {
+            /// Map metadata.
+            pub header: DisparityHeader,
+            /// Disparity of each left pixel in 1/256 px, 0 = invalid.
+            pub disparity_q8: [u16; $w * $h],
+        }
+
+        impl $name {
+            /// Map width in pixels.
+            pub const WIDTH: usize = $w;
+            /// Map height in pixels.
+            pub const HEIGHT: usize = $h;
+        }
+
+        impl Sequenced for $name {
+            fn sequence(&self) -> u64 {
+                self.header.frame_id
+            }
+        }
+    };
+}
+
+disparity_map!(
+    DisparityMap320x240,
+    "hvs::DisparityMap320x240",
+    LO_WIDTH,
+    LO_HEIGHT,
+    "Disparity of the fast path's left image (153 664 bytes)."
+);
+disparity_map!(
+    DisparityMap640x480,
+    "hvs::DisparityMap640x480",
+    HI_WIDTH,
+    HI_HEIGHT,
+    "Disparity of the long-range path's left image (614 464 bytes)."
+);
+
+/// Which stereo path a range came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RangeSource {
+    /// No valid pixels in the window.
+    None = 0,
+    /// The 320x240 fast path.
+    Lo = 1,
+    /// The 640x480 long-range path.
+    Hi = 2,
+}
+
+impl RangeSource {
+    /// Decodes a `source` code (unknown codes read as `None`).
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            1 => Self::Lo,
+            2 => Self::Hi,
+            _ => Self::None,
+        }
+    }
+}
+
+/// The range seen in one vertical window of the image (24 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::RangeWindow")]
+pub struct RangeWindow {
+    /// Range estimate in metres (the configured statistic); 0 when no pixel is valid.
+    pub range_m: f32,
+    /// A low percentile of the window's ranges (nearest obstacle), metres.
+    pub near_m: f32,
+    /// Mean range (the reference statistic), metres.
+    pub mean_m: f32,
+    /// Edge pixels with a valid disparity in the window.
+    pub valid_px: u32,
+    /// Confidence in [0, 1] from the valid pixel count and the spread of ranges.
+    pub confidence: f32,
+    /// [`RangeSource`] code.
+    pub source: u32,
+}
+
+/// Ranges per vertical window for one fast-path frame (176 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::RangeReport")]
+pub struct RangeReport {
+    /// Fast-path frame id.
+    pub frame_id: u64,
+    /// Capture time of that frame, CLOCK_MONOTONIC ns.
+    pub capture_ns: u64,
+    /// Time the report was published, CLOCK_MONOTONIC ns.
+    pub published_ns: u64,
+    /// Frame id of the 640x480 result fused in, 0 if none was fresh enough.
+    pub hi_frame_id: u64,
+    /// Age of that 640x480 result relative to this frame's capture, ns (0 if none).
+    pub hi_age_ns: u64,
+    /// Number of windows used (3 or 5).
+    pub window_count: u32,
+    /// Edge pixels in the fused map.
+    pub edge_px: u32,
+    /// Per-window ranges, left to right; entries past `window_count` are zero.
+    pub windows: [RangeWindow; MAX_RANGE_WINDOWS],
+    /// Edge pixels with a valid disparity in the whole fused map.
+    pub valid_edge_px: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+
+impl Sequenced for RangeReport {
+    fn sequence(&self) -> u64 {
+        self.frame_id
+    }
+}
+
+/// Motion commands the decision stage can give.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum MotionCommand {
+    /// Neutral pulses: wheels stopped.
+    Stop = 0,
+    /// Drive straight ahead.
+    Forward = 1,
+    /// Turn left.
+    Left = 2,
+    /// Turn right.
+    Right = 3,
+    /// Back up.
+    Reverse = 4,
+}
+
+impl MotionCommand {
+    /// Decodes a command code; unknown codes read as `Stop` (the safe choice).
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            1 => Self::Forward,
+            2 => Self::Left,
+            3 => Self::Right,
+            4 => Self::Reverse,
+            _ => Self::Stop,
+        }
+    }
+
+    /// Short upper-case label for status lines.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Stop => "STOP",
+            Self::Forward => "FWD",
+            Self::Left => "LEFT",
+            Self::Right => "RIGHT",
+            Self::Reverse => "REV",
+        }
+    }
+}
+
+/// Intersection types of the reference navigation table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum IntersectionType {
+    /// Not enough information.
+    Unknown = 0,
+    /// Walls left, front and right.
+    DeadEnd = 1,
+    /// Walls left and front: the way continues right.
+    RightTurn = 2,
+    /// Walls front and right: the way continues left.
+    LeftTurn = 3,
+    /// Wall in front only: branches left and right.
+    TBottom = 4,
+    /// Walls left and right: a straight hallway.
+    StraightHallway = 5,
+    /// Wall on the right only: branch left, straight continues.
+    TWallRight = 6,
+    /// Wall on the left only: branch right, straight continues.
+    TWallLeft = 7,
+    /// The reference's "B intersection".
+    BIntersection = 8,
+    /// No walls: four-way crossing.
+    XIntersection = 9,
+}
+
+impl IntersectionType {
+    /// Decodes a code; unknown codes read as `Unknown`.
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            1 => Self::DeadEnd,
+            2 => Self::RightTurn,
+            3 => Self::LeftTurn,
+            4 => Self::TBottom,
+            5 => Self::StraightHallway,
+            6 => Self::TWallRight,
+            7 => Self::TWallLeft,
+            8 => Self::BIntersection,
+            9 => Self::XIntersection,
+            _ => Self::Unknown,
+        }
+    }
+
+    /// Short label for status lines.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Unknown => "unknown",
+            Self::DeadEnd => "dead-end",
+            Self::RightTurn => "right-turn",
+            Self::LeftTurn => "left-turn",
+            Self::TBottom => "T-bottom",
+            Self::StraightHallway => "hallway",
+            Self::TWallRight => "T-wall-right",
+            Self::TWallLeft => "T-wall-left",
+            Self::BIntersection => "B",
+            Self::XIntersection => "X",
+        }
+    }
+}
+
+/// One navigation decision per fast-path frame (64 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::Decision")]
+pub struct Decision {
+    /// Frame id the decision was made from.
+    pub frame_id: u64,
+    /// Capture time of that frame, CLOCK_MONOTONIC ns.
+    pub capture_ns: u64,
+    /// Time the decision was published, CLOCK_MONOTONIC ns.
+    pub published_ns: u64,
+    /// [`MotionCommand`] code.
+    pub command: u32,
+    /// [`IntersectionType`] code.
+    pub intersection: u32,
+    /// Membership in [0, 1] of "wall on the left".
+    pub wall_left: f32,
+    /// Membership in [0, 1] of "wall in front".
+    pub wall_front: f32,
+    /// Membership in [0, 1] of "wall on the right".
+    pub wall_right: f32,
+    /// Turn angle for turn commands, degrees (0 otherwise).
+    pub turn_angle_deg: f32,
+    /// PSC ramp value to use with the command (0..63).
+    pub ramp: u32,
+    /// Decision policy code (see the decision stage).
+    pub policy: u32,
+    /// Reserved, zero.
+    pub reserved: [u32; 2],
+}
+
+impl Sequenced for Decision {
+    fn sequence(&self) -> u64 {
+        self.frame_id
+    }
+}
+
+/// Why the actuator sent what it sent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum SendReason {
+    /// A fresh decision.
+    Decision = 1,
+    /// Neutral: no fresh decision within the watchdog bound.
+    WatchdogNeutral = 2,
+    /// Neutral: the stage is shutting down.
+    ShutdownNeutral = 3,
+    /// Neutral: an internal error.
+    ErrorNeutral = 4,
+    /// Neutral: sent once when the link comes up.
+    StartupNeutral = 5,
+}
+
+impl SendReason {
+    /// Decodes a reason code.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            1 => Some(Self::Decision),
+            2 => Some(Self::WatchdogNeutral),
+            3 => Some(Self::ShutdownNeutral),
+            4 => Some(Self::ErrorNeutral),
+            5 => Some(Self::StartupNeutral),
+            _ => None,
+        }
+    }
+
+    /// True for every neutral (stop) reason.
+    pub fn is_neutral(self) -> bool {
+        !matches!(self, Self::Decision)
+    }
+}
+
+/// What the actuator wrote to the servo controller (72 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::ActuatorReport")]
+pub struct ActuatorReport {
+    /// Counter of reports from this actuator process.
+    pub seq: u64,
+    /// Time the last byte was handed to the serial port, CLOCK_MONOTONIC ns.
+    pub sent_ns: u64,
+    /// Frame id of the decision acted on (0 for neutral without a decision).
+    pub decision_frame_id: u64,
+    /// Capture time of that decision's frame, CLOCK_MONOTONIC ns (0 if none).
+    pub decision_capture_ns: u64,
+    /// Publication time of that decision, CLOCK_MONOTONIC ns (0 if none).
+    pub decision_published_ns: u64,
+    /// [`SendReason`] code.
+    pub reason: u32,
+    /// [`MotionCommand`] code of the motion sent.
+    pub command: u32,
+    /// Pulse width sent to the left wheels, 2 us units.
+    pub left_pw: u16,
+    /// Pulse width sent to the right wheels, 2 us units.
+    pub right_pw: u16,
+    /// Number of valid bytes in `bytes`.
+    pub byte_count: u32,
+    /// The bytes written, both wheel commands (2 x 8 bytes).
+    pub bytes: [u8; 16],
+}
+
+impl Sequenced for ActuatorReport {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
+/// Liveness state a stage reports about itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum StageHealth {
+    /// Opening devices and services.
+    Starting = 1,
+    /// Working normally.
+    Running = 2,
+    /// Running but impaired (for example a device is missing and being retried).
+    Degraded = 3,
+    /// Shutting down.
+    Stopping = 4,
+}
+
+impl StageHealth {
+    /// Decodes a state code.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            1 => Some(Self::Starting),
+            2 => Some(Self::Running),
+            3 => Some(Self::Degraded),
+            4 => Some(Self::Stopping),
+            _ => None,
+        }
+    }
+
+    /// Lower-case label.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Starting => "starting",
+            Self::Running => "running",
+            Self::Degraded => "degraded",
+            Self::Stopping => "stopping",
+        }
+    }
+}
+
+/// Per-stage heartbeat and counters, published about 10 times a second from the stage's main
+/// loop, so a stage whose loop hangs stops beating (184 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::StageHeartbeat")]
+pub struct StageHeartbeat {
+    /// Heartbeat counter of this process.
+    pub seq: u64,
+    /// Time of this heartbeat, CLOCK_MONOTONIC ns.
+    pub time_ns: u64,
+    /// Process start time, CLOCK_MONOTONIC ns.
+    pub started_ns: u64,
+    /// Samples taken in since start.
+    pub frames_in: u64,
+    /// Samples published since start.
+    pub frames_out: u64,
+    /// Input samples lost to overflow since start (sequence gaps).
+    pub drops: u64,
+    /// Errors since start.
+    pub errors: u64,
+    /// Median processing latency over the last second, ns.
+    pub latency_p50_ns: u64,
+    /// 99th percentile processing latency over the last second, ns.
+    pub latency_p99_ns: u64,
+    /// Largest processing latency over the last second, ns.
+    pub latency_max_ns: u64,
+    /// Process id.
+    pub pid: u32,
+    /// [`StageHealth`] code.
+    pub health: u32,
+    /// Stage name, NUL-padded.
+    pub stage: [u8; NAME_LEN],
+    /// Free-text status note, NUL-padded (for example the device in use).
+    pub note: [u8; 64],
+}
+
+impl Sequenced for StageHeartbeat {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
+/// Ground truth published by the simulator for tests and reports (88 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::SimTruth")]
+pub struct SimTruth {
+    /// Counter of truth samples.
+    pub seq: u64,
+    /// Publication time, CLOCK_MONOTONIC ns.
+    pub time_ns: u64,
+    /// Simulated time since the simulator started, s.
+    pub sim_time_s: f64,
+    /// Robot x, metres (east).
+    pub x_m: f64,
+    /// Robot y, metres (north).
+    pub y_m: f64,
+    /// Robot heading, radians CCW from east.
+    pub heading_rad: f64,
+    /// Distance driven since start, metres.
+    pub odometer_m: f64,
+    /// Last frame id rendered.
+    pub frame_id: u64,
+    /// Servo-controller frames received.
+    pub psc_frames: u64,
+    /// Malformed servo-controller frames received.
+    pub psc_malformed: u32,
+    /// Collision events (rising edges) since start.
+    pub collisions: u32,
+    /// 1 while the robot touches a wall.
+    pub in_collision: u32,
+    /// Current left-wheel pulse width, 2 us units (0 = never commanded).
+    pub left_pw: u16,
+    /// Current right-wheel pulse width, 2 us units (0 = never commanded).
+    pub right_pw: u16,
+}
+
+impl Sequenced for SimTruth {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
+/// Supervisor-side state of a stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum StageState {
+    /// Not running and not going to be started.
+    Stopped = 1,
+    /// Spawned, no heartbeat yet.
+    Starting = 2,
+    /// Beating.
+    Running = 3,
+    /// Waiting out a restart backoff.
+    Backoff = 4,
+    /// Restarted too often: given up.
+    Failed = 5,
+    /// Disabled in the config.
+    Disabled = 6,
+    /// Being stopped.
+    Stopping = 7,
+}
+
+impl StageState {
+    /// Decodes a state code.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            1 => Some(Self::Stopped),
+            2 => Some(Self::Starting),
+            3 => Some(Self::Running),
+            4 => Some(Self::Backoff),
+            5 => Some(Self::Failed),
+            6 => Some(Self::Disabled),
+            7 => Some(Self::Stopping),
+            _ => None,
+        }
+    }
+
+    /// Lower-case label.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Stopped => "stopped",
+            Self::Starting => "starting",
+            Self::Running => "running",
+            Self::Backoff => "backoff",
+            Self::Failed => "failed",
+            Self::Disabled => "disabled",
+            Self::Stopping => "stopping",
+        }
+    }
+}
+
+/// One stage as the supervisor sees it (96 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::StageStatusEntry")]
+pub struct StageStatusEntry {
+    /// Stage name, NUL-padded.
+    pub stage: [u8; NAME_LEN],
+    /// Samples taken in, summed over restarts.
+    pub frames_in: u64,
+    /// Samples published, summed over restarts.
+    pub frames_out: u64,
+    /// Input samples lost to overflow, summed over restarts.
+    pub drops: u64,
+    /// Median processing latency over the last second, ns.
+    pub latency_p50_ns: u64,
+    /// 99th percentile processing latency over the last second, ns.
+    pub latency_p99_ns: u64,
+    /// Current process id (0 if not running).
+    pub pid: u32,
+    /// [`StageState`] code.
+    pub state: u32,
+    /// Restarts since the supervisor started.
+    pub restarts: u32,
+    /// Output rate over the last status period, Hz.
+    pub rate_hz: f32,
+    /// Time since the last heartbeat, ms.
+    pub heartbeat_age_ms: u32,
+    /// Exit status of the last incarnation (-signal if killed, 0 if none yet).
+    pub last_exit: i32,
+}
+
+/// The supervisor's view of the whole pipeline, published once a second with history 1 so
+/// `hvs status` and probes get it at once (1 208 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::SupervisorStatus")]
+pub struct SupervisorStatus {
+    /// Status counter.
+    pub seq: u64,
+    /// Publication time, CLOCK_MONOTONIC ns.
+    pub time_ns: u64,
+    /// Supervisor start time, CLOCK_MONOTONIC ns.
+    pub started_ns: u64,
+    /// Median capture-to-decision latency over the last period, ns.
+    pub decision_latency_p50_ns: u64,
+    /// 99th percentile capture-to-decision latency over the last period, ns.
+    pub decision_latency_p99_ns: u64,
+    /// Supervisor process id.
+    pub supervisor_pid: u32,
+    /// Number of valid entries in `stages`.
+    pub stage_count: u32,
+    /// 1 while shutting down.
+    pub stopping: u32,
+    /// Last [`MotionCommand`] code decided.
+    pub last_command: u32,
+    /// Stage entries.
+    pub stages: [StageStatusEntry; MAX_STAGES],
+}
+
+impl Sequenced for SupervisorStatus {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
+/// Requests to the supervisor from `hvs restart` / `hvs stop`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ControlCommand {
+    /// Replace one stage in place.
+    Restart = 1,
+    /// Orderly stop of the whole pipeline.
+    Stop = 2,
+}
+
+impl ControlCommand {
+    /// Decodes a command code.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            1 => Some(Self::Restart),
+            2 => Some(Self::Stop),
+            _ => None,
+        }
+    }
+}
+
+/// A control request (48 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::ControlRequest")]
+pub struct ControlRequest {
+    /// Request counter of the sender.
+    pub seq: u64,
+    /// Sender process id.
+    pub sender_pid: u32,
+    /// [`ControlCommand`] code.
+    pub command: u32,
+    /// Target stage for `Restart`, NUL-padded.
+    pub stage: [u8; NAME_LEN],
+}
+
+impl Sequenced for ControlRequest {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{offset_of, size_of};
+
+    #[test]
+    fn sizes_match_docs_ipc_md() {
+        assert_eq!(size_of::<FrameHeader>(), 64);
+        assert_eq!(size_of::<StereoFrame320x240>(), 64 + 2 * 76_800);
+        assert_eq!(size_of::<StereoFrame640x480>(), 64 + 2 * 307_200);
+        assert_eq!(size_of::<DisparityHeader>(), 64);
+        assert_eq!(size_of::<DisparityMap320x240>(), 64 + 2 * 76_800);
+        assert_eq!(size_of::<DisparityMap640x480>(), 64 + 2 * 307_200);
+        assert_eq!(size_of::<RangeWindow>(), 24);
+        assert_eq!(size_of::<RangeReport>(), 176);
+        assert_eq!(size_of::<Decision>(), 64);
+        assert_eq!(size_of::<ActuatorReport>(), 72);
+        assert_eq!(size_of::<StageHeartbeat>(), 184);
+        assert_eq!(size_of::<SimTruth>(), 88);
+        assert_eq!(size_of::<StageStatusEntry>(), 96);
+        assert_eq!(size_of::<SupervisorStatus>(), 56 + 12 * 96);
+        assert_eq!(size_of::<ControlRequest>(), 48);
+    }
+
+    #[test]
+    fn offsets_match_docs_ipc_md() {
+        assert_eq!(offset_of!(FrameHeader, skew_ns), 32);
+        assert_eq!(offset_of!(FrameHeader, width), 48);
+        assert_eq!(offset_of!(FrameHeader, source), 56);
+        assert_eq!(offset_of!(StereoFrame320x240, right), 64 + 76_800);
+        assert_eq!(offset_of!(DisparityHeader, algorithm), 56);
+        assert_eq!(offset_of!(RangeReport, windows), 48);
+        assert_eq!(offset_of!(Decision, command), 24);
+        assert_eq!(offset_of!(ActuatorReport, reason), 40);
+        assert_eq!(offset_of!(ActuatorReport, bytes), 56);
+        assert_eq!(offset_of!(StageHeartbeat, pid), 80);
+        assert_eq!(offset_of!(StageHeartbeat, stage), 88);
+        assert_eq!(offset_of!(SimTruth, psc_malformed), 72);
+        assert_eq!(offset_of!(SupervisorStatus, stages), 56);
+    }
+
+    #[test]
+    fn names_round_trip_and_truncate_on_char_boundary() {
+        let n: [u8; 8] = encode_name("stereo-lo");
+        assert_eq!(decode_name(&n), "stereo-l");
+        let n: [u8; 4] = encode_name("aé"); // 'é' is two bytes: "aé" fits exactly in 3
+        assert_eq!(decode_name(&n), "aé");
+        let n: [u8; 2] = encode_name("aé");
+        assert_eq!(decode_name(&n), "a");
+    }
+
+    #[test]
+    fn codes_round_trip() {
+        for a in StereoAlgorithm::ALL {
+            assert_eq!(StereoAlgorithm::from_code(a as u32), Some(a));
+            assert_eq!(StereoAlgorithm::from_name(a.name()), Some(a));
+        }
+        for c in 0..5 {
+            assert_eq!(MotionCommand::from_code(c) as u32, c);
+        }
+        assert_eq!(MotionCommand::from_code(99), MotionCommand::Stop);
+        for c in 0..10 {
+            assert_eq!(IntersectionType::from_code(c) as u32, c);
+        }
+    }
+}

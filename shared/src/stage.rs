@@ -1,0 +1,368 @@
+//! What every stage process does the same way: command line, logging, config, node, heartbeat,
+//! the once-a-second status line and the event loop.
+//!
+//! A stage's `main.rs` is then only its own wiring:
+//! ```ignore
+//! fn main() -> std::process::ExitCode {
+//!     hvs_shared::stage::run_stage("fusion", |rt| { /* open topics, loop */ Ok(()) })
+//! }
+//! ```
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use tracing_subscriber::EnvFilter;
+
+use crate::clock::monotonic_ns;
+use crate::config::{ConfigError, HvsConfig, validate_instance_name};
+use crate::ipc::{
+    IpcNode, IpcService, NodeOpenError, PublishError, TopicOpenError, TopicPublisher,
+};
+use crate::messages::{NAME_LEN, StageHealth, StageHeartbeat, encode_name};
+use crate::stats::{LatencySummary, LatencyWindow};
+use crate::topics;
+
+/// How often a stage beats. The supervisor's hang timeout is a multiple of this.
+pub const HEARTBEAT_PERIOD: Duration = Duration::from_millis(100);
+
+/// Log target of the once-a-second status lines (filter with `RUST_LOG=hvs_status=off`).
+pub const STATUS_TARGET: &str = "hvs_status";
+
+/// Command line every stage binary accepts (the supervisor passes all three).
+#[derive(Debug, Clone, Parser)]
+#[command(
+    version,
+    about = "An hvs pipeline stage (normally started by `hvs run`)."
+)]
+pub struct StageArgs {
+    /// The pipeline configuration file (TOML).
+    #[arg(long, value_name = "FILE")]
+    pub config: PathBuf,
+    /// Instance name; overrides the config's `instance`.
+    #[arg(long, value_name = "NAME")]
+    pub instance: Option<String>,
+    /// Stage name (for example `stereo-lo`); defaults to the binary's role.
+    #[arg(long, value_name = "NAME")]
+    pub stage: Option<String>,
+}
+
+/// Why a stage could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum StageStartError {
+    /// The config file is missing or invalid.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// `--instance` is not a valid instance name.
+    #[error("--instance {0}")]
+    Instance(String),
+    /// The iceoryx2 node could not be created.
+    #[error(transparent)]
+    Node(#[from] NodeOpenError),
+    /// The heartbeat topic could not be opened.
+    #[error(transparent)]
+    Heartbeat(#[from] TopicOpenError),
+}
+
+/// Errors a stage body may return.
+pub type StageError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// Sets up `tracing` for a process: RUST_LOG filters (default `info`), output to stderr.
+pub fn init_tracing() {
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    // Ignore the error of a second initialisation (tests call this repeatedly).
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(ansi)
+        .with_target(false)
+        .try_init();
+    let iceoryx_debug = std::env::var("RUST_LOG").is_ok_and(|v| v.contains("iceoryx2"));
+    set_log_level(if iceoryx_debug {
+        LogLevel::Debug
+    } else {
+        LogLevel::Warn
+    });
+}
+
+/// Parses the stage command line, starts the runtime and runs `body`; maps the outcome to an
+/// exit code (0 clean stop, 1 runtime error, 2 bad configuration or arguments).
+pub fn run_stage<F>(role: &str, body: F) -> ExitCode
+where
+    F: FnOnce(&mut StageRuntime) -> Result<(), StageError>,
+{
+    init_tracing();
+    let args = StageArgs::parse();
+    let mut runtime = match StageRuntime::start(&args, role) {
+        Ok(rt) => rt,
+        Err(e) => {
+            tracing::error!("{role}: cannot start: {}", crate::error_chain(&e));
+            return match e {
+                StageStartError::Config(_) | StageStartError::Instance(_) => ExitCode::from(2),
+                _ => ExitCode::from(1),
+            };
+        }
+    };
+    let stage = runtime.stage.clone();
+    match body(&mut runtime) {
+        Ok(()) => {
+            runtime.set_health(StageHealth::Stopping);
+            runtime.beat();
+            tracing::info!("{stage}: stopped");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            tracing::error!("{stage}: {}", crate::error_chain(e.as_ref()));
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// What the event loop should do after handling an event.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LoopControl {
+    /// Keep going.
+    Continue,
+    /// Leave the loop (clean stop).
+    Stop,
+}
+
+/// The per-process state shared by every stage: config, node, heartbeat and counters.
+pub struct StageRuntime {
+    /// Stage name, e.g. `stereo-lo`.
+    pub stage: String,
+    /// The validated configuration.
+    pub config: HvsConfig,
+    /// The iceoryx2 node.
+    pub node: IpcNode,
+    heartbeat: TopicPublisher<StageHeartbeat>,
+    started_ns: u64,
+    health: StageHealth,
+    note: String,
+    frames_in: u64,
+    frames_out: u64,
+    drops: u64,
+    errors: u64,
+    latency: LatencyWindow,
+    last_latency: LatencySummary,
+    last_beat: Instant,
+    last_status: Instant,
+    status_base: (u64, u64, u64),
+}
+
+impl StageRuntime {
+    /// Loads the config, creates the node (cleaning up after crashed processes) and opens the
+    /// heartbeat topic.
+    pub fn start(args: &StageArgs, role: &str) -> Result<Self, StageStartError> {
+        let mut config = HvsConfig::load(&args.config)?;
+        if let Some(instance) = &args.instance {
+            validate_instance_name(instance).map_err(StageStartError::Instance)?;
+            config.instance = instance.clone();
+        }
+        let stage = args.stage.clone().unwrap_or_else(|| role.to_string());
+        let node = IpcNode::create(&config.instance, &stage)?;
+        let heartbeat = node.stage_publisher(&topics::HEARTBEAT, &stage)?;
+        tracing::info!(
+            "{stage}: starting (instance {}, config {}, pid {})",
+            config.instance,
+            args.config.display(),
+            std::process::id()
+        );
+        let now = Instant::now();
+        let mut rt = Self {
+            stage,
+            config,
+            node,
+            heartbeat,
+            started_ns: monotonic_ns(),
+            health: StageHealth::Starting,
+            note: String::new(),
+            frames_in: 0,
+            frames_out: 0,
+            drops: 0,
+            errors: 0,
+            latency: LatencyWindow::default(),
+            last_latency: LatencySummary::default(),
+            last_beat: now,
+            last_status: now,
+            status_base: (0, 0, 0),
+        };
+        rt.beat();
+        Ok(rt)
+    }
+
+    /// Sets the health reported in heartbeats.
+    pub fn set_health(&mut self, health: StageHealth) {
+        self.health = health;
+    }
+
+    /// Sets the free-text note reported in heartbeats (truncated to 64 bytes).
+    pub fn set_note(&mut self, note: impl Into<String>) {
+        self.note = note.into();
+    }
+
+    /// Counts samples taken in.
+    pub fn count_in(&mut self, n: u64) {
+        self.frames_in += n;
+    }
+
+    /// Counts one published sample and its processing latency.
+    pub fn count_out(&mut self, latency_ns: u64) {
+        self.frames_out += 1;
+        self.latency.record(latency_ns);
+    }
+
+    /// Sets the total of input samples lost so far.
+    pub fn set_drops(&mut self, total: u64) {
+        self.drops = total;
+    }
+
+    /// Counts an error (it is also logged by the caller).
+    pub fn count_error(&mut self) {
+        self.errors += 1;
+    }
+
+    /// Publishes a heartbeat now and, once a second, logs the status line.
+    pub fn beat(&mut self) {
+        self.last_beat = Instant::now();
+        if self.last_status.elapsed() >= Duration::from_secs(1) {
+            self.status_line();
+        }
+        let mut hb = StageHeartbeat {
+            seq: self.heartbeat.sent() + 1,
+            time_ns: monotonic_ns(),
+            started_ns: self.started_ns,
+            frames_in: self.frames_in,
+            frames_out: self.frames_out,
+            drops: self.drops,
+            errors: self.errors,
+            latency_p50_ns: self.last_latency.p50_ns,
+            latency_p99_ns: self.last_latency.p99_ns,
+            latency_max_ns: self.last_latency.max_ns,
+            pid: std::process::id(),
+            health: self.health as u32,
+            stage: [0; NAME_LEN],
+            note: [0; 64],
+        };
+        hb.stage = encode_name(&self.stage);
+        hb.note = encode_name(&self.note);
+        if let Err(e) = self.heartbeat.publish_copy(&hb) {
+            tracing::warn!("{}: heartbeat: {e}", self.stage);
+        }
+    }
+
+    fn status_line(&mut self) {
+        let secs = self.last_status.elapsed().as_secs_f64().max(1e-3);
+        self.last_latency = self.latency.take_summary();
+        let (base_in, base_out, base_drops) = self.status_base;
+        tracing::info!(
+            target: STATUS_TARGET,
+            "{} {}: in {:.1}/s out {:.1}/s drops {} errors {} latency p50 {:.2} ms p99 {:.2} ms {}",
+            self.stage,
+            self.health.label(),
+            (self.frames_in - base_in) as f64 / secs,
+            (self.frames_out - base_out) as f64 / secs,
+            self.drops - base_drops,
+            self.errors,
+            self.last_latency.p50_ns as f64 / 1e6,
+            self.last_latency.p99_ns as f64 / 1e6,
+            self.note
+        );
+        self.status_base = (self.frames_in, self.frames_out, self.drops);
+        self.last_status = Instant::now();
+    }
+
+    /// Publishes a heartbeat if one is due.
+    pub fn beat_if_due(&mut self) {
+        if self.last_beat.elapsed() >= HEARTBEAT_PERIOD {
+            self.beat();
+        }
+    }
+
+    /// A WaitSet that wakes on termination signals as well as on attached listeners.
+    pub fn waitset(&self) -> Result<WaitSet<IpcService>, StageError> {
+        Ok(WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<IpcService>()
+            .map_err(|e| format!("cannot create WaitSet: {e:?}"))?)
+    }
+
+    /// Runs the event loop: waits on `waitset` (whose listeners the caller attached), calls
+    /// `on_event` for each attachment that fired, beats every [`HEARTBEAT_PERIOD`], and returns
+    /// on SIGINT/SIGTERM, on [`LoopControl::Stop`] or on the first error.
+    pub fn run_loop<F>(
+        &mut self,
+        waitset: &WaitSet<IpcService>,
+        mut on_event: F,
+    ) -> Result<(), StageError>
+    where
+        F: FnMut(&mut Self, WaitSetAttachmentId<IpcService>) -> Result<LoopControl, StageError>,
+    {
+        self.set_health(StageHealth::Running);
+        self.beat();
+        loop {
+            let timeout = HEARTBEAT_PERIOD.saturating_sub(self.last_beat.elapsed());
+            let mut failure = None;
+            let mut stop = false;
+            let result = waitset.wait_and_process_once_with_timeout(
+                |id| match on_event(self, id) {
+                    Ok(LoopControl::Continue) => CallbackProgression::Continue,
+                    Ok(LoopControl::Stop) => {
+                        stop = true;
+                        CallbackProgression::Stop
+                    }
+                    Err(e) => {
+                        failure = Some(e);
+                        CallbackProgression::Stop
+                    }
+                },
+                timeout.max(Duration::from_millis(1)),
+            );
+            if let Some(e) = failure {
+                return Err(e);
+            }
+            self.beat_if_due();
+            if stop {
+                return Ok(());
+            }
+            match result {
+                Ok(WaitSetRunResult::TerminationRequest) => {
+                    tracing::info!("{}: termination requested", self.stage);
+                    return Ok(());
+                }
+                Ok(_) => {}
+                Err(e) => return Err(format!("WaitSet failed: {e:?}").into()),
+            }
+        }
+    }
+
+    /// Logs and counts a non-fatal error.
+    pub fn report_error(&mut self, context: &str, e: &dyn std::fmt::Display) {
+        self.count_error();
+        tracing::warn!("{}: {context}: {e}", self.stage);
+    }
+
+    /// Publishes `sample`, counting failures as errors rather than stopping the stage.
+    pub fn send_or_report<T>(
+        &mut self,
+        publisher: &mut TopicPublisher<T>,
+        sample: crate::ipc::LoanedSample<T>,
+        latency_ns: u64,
+    ) where
+        T: core::fmt::Debug + ZeroCopySend + bytemuck::Pod + 'static,
+    {
+        match publisher.send(sample) {
+            Ok(_) => self.count_out(latency_ns),
+            Err(e) => self.report_error("publish", &e as &dyn std::fmt::Display),
+        }
+    }
+
+    /// Logs a publish error that happened before a sample existed (a failed loan).
+    pub fn report_publish_error(&mut self, e: &PublishError) {
+        self.report_error("publish", e);
+    }
+}

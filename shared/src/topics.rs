@@ -1,0 +1,184 @@
+//! Every topic of an hvs pipeline: the whole data flow in one file.
+//!
+//! ```text
+//!            pty (PSC bytes, 2400 baud)
+//!   +-------------------------------------------------------------------------------+
+//!   v                                                                               |
+//!  sim --sim/camera/640x480--> capture --frames/320x240--> stereo-lo --disparity/320x240--+
+//!   |                             |  \                                                 |  |
+//!   |                             |   +--frames/640x480--> stereo-hi --disparity/640x480-+|
+//!   |                             |                                                     ||
+//!   |                             +--frames/320x240 + frames/640x480 (left images)--> fusion
+//!   |                                                                                   |
+//!   |                                                    ranges <-----------------------+
+//!   |                                                      |
+//!   |                                                      v
+//!   |                                                  decision --decisions--> actuator --+
+//!   |                                                                             |      |
+//!   +--sim/truth--> supervisor, probes, tests          actuator/sent <------------+      |
+//!                                                                                        |
+//!   every stage --heartbeat/<stage>--> supervisor --supervisor/status--> hvs status, probe
+//!   hvs restart / hvs stop --supervisor/control--> supervisor                            |
+//!   serial port (real /dev/ttyUSB0, or the simulator's pty) <----------------------------+
+//! ```
+//!
+//! | service (under `hvs/<instance>/`) | payload | publisher | subscribers |
+//! |---|---|---|---|
+//! | `sim/camera/640x480` | [`StereoFrame640x480`] | sim | capture |
+//! | `sim/truth` | [`SimTruth`] | sim | supervisor, probe, tests |
+//! | `frames/320x240` | [`StereoFrame320x240`] | capture | stereo-lo, fusion, probe |
+//! | `frames/640x480` | [`StereoFrame640x480`] | capture | stereo-hi, fusion, probe |
+//! | `disparity/320x240` | [`DisparityMap320x240`] | stereo-lo | fusion, probe |
+//! | `disparity/640x480` | [`DisparityMap640x480`] | stereo-hi | fusion, probe |
+//! | `ranges` | [`RangeReport`] | fusion | decision, probe |
+//! | `decisions` | [`Decision`] | decision | actuator, supervisor, probe |
+//! | `actuator/sent` | [`ActuatorReport`] | actuator | supervisor, probe |
+//! | `heartbeat/<stage>` | [`StageHeartbeat`] | each stage | supervisor, probe |
+//! | `supervisor/status` | [`SupervisorStatus`] | supervisor | `hvs status`, probe |
+//! | `supervisor/control` | [`ControlRequest`] | `hvs restart`, `hvs stop` | supervisor |
+//!
+//! Every publish/subscribe service has an event service of the same name: the publisher
+//! notifies it after each send and subscribers block on it (a WaitSet), so nothing polls.
+//! Slow readers never block a publisher: every topic uses iceoryx2's safe overflow (the oldest
+//! sample in a full subscriber buffer is replaced), and subscribers count the lost samples from
+//! gaps in the payload's sequence number ([`Sequenced`](crate::messages::Sequenced)).
+//! History 1 means a subscriber that joins late (a probe, a restarted stage) gets the newest
+//! sample at once.
+
+use core::marker::PhantomData;
+
+use crate::messages::{
+    ActuatorReport, ControlRequest, Decision, DisparityMap320x240, DisparityMap640x480,
+    RangeReport, SimTruth, StageHeartbeat, StereoFrame320x240, StereoFrame640x480,
+    SupervisorStatus,
+};
+
+/// Prefix of every hvs service name.
+pub const SERVICE_ROOT: &str = "hvs";
+
+/// A publish/subscribe topic: its service name below `hvs/<instance>/` and the settings every
+/// process opens it with (iceoryx2 requires openers to agree with the creator).
+#[derive(Debug)]
+pub struct Topic<T> {
+    /// Service path below `hvs/<instance>/`.
+    pub path: &'static str,
+    /// Maximum number of publishers.
+    pub max_publishers: usize,
+    /// Maximum number of subscribers (each attached probe takes one).
+    pub max_subscribers: usize,
+    /// Samples a late subscriber receives on connecting.
+    pub history: usize,
+    /// Largest subscriber queue.
+    pub max_buffer: usize,
+    /// Samples one subscriber may hold at once.
+    pub max_borrowed: usize,
+    _payload: PhantomData<fn() -> T>,
+}
+
+impl<T> Topic<T> {
+    const fn new(path: &'static str) -> Self {
+        Self {
+            path,
+            max_publishers: 1,
+            max_subscribers: 8,
+            history: 1,
+            max_buffer: 4,
+            max_borrowed: 4,
+            _payload: PhantomData,
+        }
+    }
+
+    const fn frames(path: &'static str) -> Self {
+        // Image topics: fusion keeps a few recent frames borrowed to pair them with disparity
+        // maps that arrive later; every additional slot costs one frame of shared memory.
+        Self {
+            max_subscribers: 6,
+            max_buffer: 2,
+            max_borrowed: 5,
+            ..Self::new(path)
+        }
+    }
+
+    const fn with_publishers(self, max_publishers: usize) -> Self {
+        Self {
+            max_publishers,
+            ..self
+        }
+    }
+
+    /// Full iceoryx2 service name of this topic in `instance`.
+    pub fn service_name(&self, instance: &str) -> String {
+        format!("{SERVICE_ROOT}/{instance}/{}", self.path)
+    }
+
+    /// Full service name of a per-stage topic (such as [`HEARTBEAT`]) for `stage`.
+    pub fn stage_service_name(&self, instance: &str, stage: &str) -> String {
+        format!("{SERVICE_ROOT}/{instance}/{}/{stage}", self.path)
+    }
+}
+
+/// Raw camera pairs rendered by the simulator (the simulated Minoru).
+pub const SIM_CAMERA: Topic<StereoFrame640x480> = Topic::frames("sim/camera/640x480");
+/// Simulator ground truth: pose, collisions, pulses.
+pub const SIM_TRUTH: Topic<SimTruth> = Topic::new("sim/truth");
+/// Fast-path pairs, 320x240.
+pub const FRAMES_LO: Topic<StereoFrame320x240> = Topic::frames("frames/320x240");
+/// Long-range pairs, 640x480.
+pub const FRAMES_HI: Topic<StereoFrame640x480> = Topic::frames("frames/640x480");
+/// Disparity maps of the fast path.
+pub const DISPARITY_LO: Topic<DisparityMap320x240> = Topic::frames("disparity/320x240");
+/// Disparity maps of the long-range path.
+pub const DISPARITY_HI: Topic<DisparityMap640x480> = Topic::frames("disparity/640x480");
+/// Ranges per window, one report per fast-path frame.
+pub const RANGES: Topic<RangeReport> = Topic::new("ranges");
+/// Navigation decisions, one per range report.
+pub const DECISIONS: Topic<Decision> = Topic::new("decisions");
+/// What the actuator wrote to the serial port.
+pub const ACTUATOR_SENT: Topic<ActuatorReport> = Topic::new("actuator/sent");
+/// Per-stage heartbeats: use [`Topic::stage_service_name`] with the stage name.
+pub const HEARTBEAT: Topic<StageHeartbeat> = Topic::new("heartbeat");
+/// The supervisor's status table.
+pub const SUPERVISOR_STATUS: Topic<SupervisorStatus> = Topic::new("supervisor/status");
+/// Requests to the supervisor (several `hvs restart` may run at once).
+pub const SUPERVISOR_CONTROL: Topic<ControlRequest> =
+    Topic::new("supervisor/control").with_publishers(4);
+
+/// Every fixed topic path with its iceoryx2 payload type name, for discovery by probes.
+pub const ALL_TOPIC_PATHS: [(&str, &str); 11] = [
+    (SIM_CAMERA.path, "hvs::StereoFrame640x480"),
+    (SIM_TRUTH.path, "hvs::SimTruth"),
+    (FRAMES_LO.path, "hvs::StereoFrame320x240"),
+    (FRAMES_HI.path, "hvs::StereoFrame640x480"),
+    (DISPARITY_LO.path, "hvs::DisparityMap320x240"),
+    (DISPARITY_HI.path, "hvs::DisparityMap640x480"),
+    (RANGES.path, "hvs::RangeReport"),
+    (DECISIONS.path, "hvs::Decision"),
+    (ACTUATOR_SENT.path, "hvs::ActuatorReport"),
+    (SUPERVISOR_STATUS.path, "hvs::SupervisorStatus"),
+    (SUPERVISOR_CONTROL.path, "hvs::ControlRequest"),
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn service_names_are_under_the_instance_prefix() {
+        assert_eq!(
+            FRAMES_LO.service_name("default"),
+            "hvs/default/frames/320x240"
+        );
+        assert_eq!(
+            HEARTBEAT.stage_service_name("t1", "stereo-lo"),
+            "hvs/t1/heartbeat/stereo-lo"
+        );
+    }
+
+    #[test]
+    fn topic_paths_are_unique() {
+        let mut paths: Vec<_> = ALL_TOPIC_PATHS.iter().map(|(p, _)| *p).collect();
+        paths.sort_unstable();
+        paths.dedup();
+        assert_eq!(paths.len(), ALL_TOPIC_PATHS.len());
+    }
+}

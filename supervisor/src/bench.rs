@@ -1,0 +1,340 @@
+//! `hvs bench ipc`: one-hop latency of a stereo pair between two real processes, through
+//! iceoryx2 shared memory (zero copy) and, as a same-run baseline, through a Unix socket that
+//! copies the same bytes.
+//!
+//! The sender stamps `CLOCK_MONOTONIC` into the frame header just before handing the frame
+//! over; the receiver (a child `hvs bench ipc-receiver` process) stamps the time it holds the
+//! frame and prints the percentiles. Both transports wake the receiver by blocking (event
+//! listener / socket read), as the pipeline does.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use hvs_shared::clock::monotonic_ns;
+use hvs_shared::ipc::IpcNode;
+use hvs_shared::messages::{FrameHeader, Sequenced, StereoFrame320x240, StereoFrame640x480};
+use hvs_shared::stats::{LatencySummary, summarize};
+use hvs_shared::topics::{self, Topic};
+use serde::{Deserialize, Serialize};
+
+/// Frame sizes the benchmark knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+pub enum FrameSize {
+    /// 320x240 pair (153 664 bytes).
+    #[value(name = "320x240")]
+    Lo,
+    /// 640x480 pair (614 464 bytes).
+    #[value(name = "640x480")]
+    Hi,
+}
+
+impl FrameSize {
+    fn bytes(self) -> usize {
+        match self {
+            Self::Lo => size_of::<StereoFrame320x240>(),
+            Self::Hi => size_of::<StereoFrame640x480>(),
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Self::Lo => "320x240",
+            Self::Hi => "640x480",
+        }
+    }
+}
+
+/// Transports compared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+pub enum Transport {
+    /// iceoryx2 publish/subscribe, zero copy.
+    Iceoryx2,
+    /// A Unix stream socket carrying a copy of the bytes.
+    UnixSocket,
+}
+
+/// What the receiver prints (one JSON line).
+#[derive(Debug, Serialize, Deserialize)]
+pub struct ReceiverResult {
+    /// Samples received.
+    pub received: u64,
+    /// Latency percentiles, ns.
+    pub p50_ns: u64,
+    /// 99th percentile, ns.
+    pub p99_ns: u64,
+    /// Largest, ns.
+    pub max_ns: u64,
+}
+
+/// Parent side: runs every size and transport and prints a table.
+pub fn run_ipc(count: u32, rate_hz: f64) -> anyhow::Result<()> {
+    if count < 10 {
+        bail!("--count {count} is too small for percentiles (use at least 10)");
+    }
+    if !(rate_hz > 0.0 && rate_hz <= 10_000.0) {
+        bail!("--rate {rate_hz} must be in (0, 10000] Hz");
+    }
+    println!(
+        "one-hop latency, sender process -> receiver process, {count} frames at {rate_hz} Hz, blocking receiver"
+    );
+    println!(
+        "{:<9} {:<12} {:>12} {:>10} {:>10} {:>10}",
+        "size", "transport", "bytes", "p50 us", "p99 us", "max us"
+    );
+    let mut rows = Vec::new();
+    for size in [FrameSize::Lo, FrameSize::Hi] {
+        for transport in [Transport::Iceoryx2, Transport::UnixSocket] {
+            let r = run_pair(size, transport, count, rate_hz)?;
+            println!(
+                "{:<9} {:<12} {:>12} {:>10.1} {:>10.1} {:>10.1}",
+                size.label(),
+                match transport {
+                    Transport::Iceoryx2 => "iceoryx2",
+                    Transport::UnixSocket => "unix-socket",
+                },
+                size.bytes(),
+                r.p50_ns as f64 / 1e3,
+                r.p99_ns as f64 / 1e3,
+                r.max_ns as f64 / 1e3
+            );
+            rows.push((size, transport, r));
+        }
+    }
+    let p50 = |s, t| {
+        rows.iter()
+            .find(|r| r.0 == s && r.1 == t)
+            .map_or(0.0, |r| r.2.p50_ns as f64)
+    };
+    println!(
+        "iceoryx2 640x480 / 320x240 p50: {:.2}x for {:.1}x the bytes (zero copy: cost does not grow with size)",
+        p50(FrameSize::Hi, Transport::Iceoryx2) / p50(FrameSize::Lo, Transport::Iceoryx2).max(1.0),
+        FrameSize::Hi.bytes() as f64 / FrameSize::Lo.bytes() as f64
+    );
+    for size in [FrameSize::Lo, FrameSize::Hi] {
+        println!(
+            "{}: unix-socket / iceoryx2 p50 = {:.1}x",
+            size.label(),
+            p50(size, Transport::UnixSocket) / p50(size, Transport::Iceoryx2).max(1.0)
+        );
+    }
+    Ok(())
+}
+
+fn run_pair(
+    size: FrameSize,
+    transport: Transport,
+    count: u32,
+    rate_hz: f64,
+) -> anyhow::Result<ReceiverResult> {
+    let instance = format!("bench{}", std::process::id());
+    let exe = std::env::current_exe().context("cannot locate the hvs executable")?;
+    let socket_path = std::env::temp_dir().join(format!("hvs-bench-{}.sock", std::process::id()));
+    let _ = std::fs::remove_file(&socket_path);
+    let listener = match transport {
+        Transport::UnixSocket => Some(
+            UnixListener::bind(&socket_path)
+                .with_context(|| format!("cannot bind {}", socket_path.display()))?,
+        ),
+        Transport::Iceoryx2 => None,
+    };
+    let mut child = Command::new(exe)
+        .args([
+            "bench",
+            "ipc-receiver",
+            "--instance",
+            &instance,
+            "--count",
+            &count.to_string(),
+        ])
+        .arg("--size")
+        .arg(size.label())
+        .arg("--transport")
+        .arg(match transport {
+            Transport::Iceoryx2 => "iceoryx2",
+            Transport::UnixSocket => "unix-socket",
+        })
+        .arg("--socket")
+        .arg(&socket_path)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .context("cannot start the receiver process")?;
+    let stdout = child.stdout.take().context("receiver stdout")?;
+    let mut lines = BufReader::new(stdout).lines();
+    let period = Duration::from_secs_f64(1.0 / rate_hz);
+    let send_result = match transport {
+        Transport::Iceoryx2 => {
+            let node = IpcNode::create(&instance, "bench-sender")?;
+            // Wait for the receiver's "ready" so no frame is sent before it subscribed.
+            wait_ready(&mut lines)?;
+            match size {
+                FrameSize::Lo => {
+                    send_iceoryx(&node, &topics::FRAMES_LO, count, period, |f| &mut f.header)
+                }
+                FrameSize::Hi => {
+                    send_iceoryx(&node, &topics::FRAMES_HI, count, period, |f| &mut f.header)
+                }
+            }
+        }
+        Transport::UnixSocket => {
+            let Some(listener) = listener else {
+                bail!("no listener");
+            };
+            let (mut stream, _) = listener.accept().context("receiver did not connect")?;
+            wait_ready(&mut lines)?;
+            send_socket(&mut stream, size.bytes(), count, period)
+        }
+    };
+    let line = lines.next().context("receiver printed no result")??;
+    let status = child.wait()?;
+    let _ = std::fs::remove_file(&socket_path);
+    send_result?;
+    if !status.success() {
+        bail!("receiver failed: {status}");
+    }
+    let result: ReceiverResult =
+        serde_json::from_str(&line).with_context(|| format!("bad receiver output {line:?}"))?;
+    if result.received < count as u64 * 9 / 10 {
+        bail!("receiver got only {} of {count} frames", result.received);
+    }
+    Ok(result)
+}
+
+fn wait_ready(
+    lines: &mut std::io::Lines<BufReader<std::process::ChildStdout>>,
+) -> anyhow::Result<()> {
+    match lines.next() {
+        Some(Ok(l)) if l == "ready" => Ok(()),
+        other => bail!("receiver did not get ready: {other:?}"),
+    }
+}
+
+fn send_iceoryx<T>(
+    node: &IpcNode,
+    topic: &Topic<T>,
+    count: u32,
+    period: Duration,
+    header: fn(&mut T) -> &mut FrameHeader,
+) -> anyhow::Result<()>
+where
+    T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + bytemuck::Pod + 'static,
+{
+    let mut publisher = node.publisher(topic)?;
+    let mut next = Instant::now();
+    for i in 1..=count as u64 {
+        let mut sample = publisher.loan()?;
+        let h = header(sample.payload_mut());
+        h.frame_id = i;
+        h.published_ns = monotonic_ns();
+        publisher.send(sample)?;
+        next += period;
+        if let Some(wait) = next.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+    }
+    // Give the receiver time to take the last frames before the service goes away.
+    std::thread::sleep(Duration::from_millis(200));
+    Ok(())
+}
+
+fn send_socket(
+    stream: &mut UnixStream,
+    bytes: usize,
+    count: u32,
+    period: Duration,
+) -> anyhow::Result<()> {
+    let mut frame = vec![0u8; bytes];
+    let mut next = Instant::now();
+    for i in 1..=count as u64 {
+        frame[..8].copy_from_slice(&i.to_le_bytes());
+        frame[8..16].copy_from_slice(&monotonic_ns().to_le_bytes());
+        stream.write_all(&frame).context("socket write")?;
+        next += period;
+        if let Some(wait) = next.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+    }
+    Ok(())
+}
+
+/// Child side: receive `count` frames, print "ready" first and the result JSON last.
+pub fn run_receiver(
+    instance: &str,
+    size: FrameSize,
+    transport: Transport,
+    count: u32,
+    socket: PathBuf,
+) -> anyhow::Result<()> {
+    let mut latencies = Vec::with_capacity(count as usize);
+    match transport {
+        Transport::Iceoryx2 => {
+            let node = IpcNode::create(instance, "bench-receiver")?;
+            match size {
+                FrameSize::Lo => {
+                    receive_iceoryx(&node, &topics::FRAMES_LO, count, &mut latencies, |f| {
+                        &f.header
+                    })?
+                }
+                FrameSize::Hi => {
+                    receive_iceoryx(&node, &topics::FRAMES_HI, count, &mut latencies, |f| {
+                        &f.header
+                    })?
+                }
+            }
+        }
+        Transport::UnixSocket => {
+            let mut stream = UnixStream::connect(&socket)
+                .with_context(|| format!("cannot connect {}", socket.display()))?;
+            println!("ready");
+            std::io::stdout().flush()?;
+            let mut frame = vec![0u8; size.bytes()];
+            for _ in 0..count {
+                stream.read_exact(&mut frame).context("socket read")?;
+                let now = monotonic_ns();
+                let mut stamp = [0u8; 8];
+                stamp.copy_from_slice(&frame[8..16]);
+                latencies.push(now.saturating_sub(u64::from_le_bytes(stamp)));
+            }
+        }
+    }
+    let s: LatencySummary = summarize(&latencies);
+    let result = ReceiverResult {
+        received: s.count,
+        p50_ns: s.p50_ns,
+        p99_ns: s.p99_ns,
+        max_ns: s.max_ns,
+    };
+    println!("{}", serde_json::to_string(&result)?);
+    Ok(())
+}
+
+fn receive_iceoryx<T>(
+    node: &IpcNode,
+    topic: &Topic<T>,
+    count: u32,
+    latencies: &mut Vec<u64>,
+    header: fn(&T) -> &FrameHeader,
+) -> anyhow::Result<()>
+where
+    T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Sequenced + 'static,
+{
+    let sub = node.subscriber(topic, 2)?;
+    println!("ready");
+    std::io::stdout().flush()?;
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while latencies.len() < count as usize && Instant::now() < deadline {
+        // Block until notified (or 100 ms), like the pipeline's stages.
+        let _ = sub
+            .listener()
+            .timed_wait(|_| {}, Duration::from_millis(100));
+        while let Some(s) = sub.receive()? {
+            let now = monotonic_ns();
+            latencies.push(now.saturating_sub(header(s.payload()).published_ns));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,320 @@
+//! `hvs`: run the robot pipeline and the tools around it.
+
+mod bench;
+mod control;
+mod process;
+mod report;
+mod run;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use hvs_shared::config::HvsConfig;
+
+/// hvs: a hybrid stereo-vision system that drives a small robot down hallways.
+#[derive(Debug, Parser)]
+#[command(version, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the whole pipeline (default: the simulated robot of config/sim.toml).
+    ///
+    /// Every stage runs as its own process; a stage that dies or hangs is restarted by its
+    /// policy without touching the others. Ctrl-C stops the actuator first (neutral pulses),
+    /// then the rest.
+    Run {
+        /// Pipeline configuration (default: config/sim.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// Instance name (overrides the config's `instance`).
+        #[arg(long, value_name = "NAME")]
+        instance: Option<String>,
+        /// Stop after this many seconds.
+        #[arg(long, value_name = "SECONDS")]
+        duration: Option<f64>,
+        /// Write a JSON report (per-stage counters, latencies) here when stopping.
+        #[arg(long, value_name = "FILE")]
+        report: Option<PathBuf>,
+    },
+    /// Show the stages of a running pipeline: pid, state, restarts, rate, latency.
+    Status {
+        #[command(flatten)]
+        target: Target,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Replace one stage of a running pipeline in place; the others keep running.
+    Restart {
+        /// Stage to restart (sim, capture, stereo-lo, stereo-hi, fusion, decision, actuator).
+        stage: String,
+        #[command(flatten)]
+        target: Target,
+        /// Give up waiting for the new process after this many seconds.
+        #[arg(long, default_value_t = 15.0, value_name = "SECONDS")]
+        timeout: f64,
+    },
+    /// Simulator tools.
+    Sim {
+        #[command(subcommand)]
+        what: SimCommand,
+    },
+    /// Benchmarks that print numbers (release builds only give meaningful figures).
+    Bench {
+        #[command(subcommand)]
+        what: BenchCommand,
+    },
+    /// Stop a running pipeline in order (actuator first).
+    Stop {
+        #[command(flatten)]
+        target: Target,
+        /// Give up waiting after this many seconds.
+        #[arg(long, default_value_t = 30.0, value_name = "SECONDS")]
+        timeout: f64,
+    },
+}
+
+/// Simulator tools.
+#[derive(Debug, Subcommand)]
+enum SimCommand {
+    /// Render one stereo pair of a map: left.png, right.png (8-bit grey) and gt_disp.png
+    /// (16-bit, disparity x 256, 0 = unknown).
+    Render {
+        /// Map file (see config/maps).
+        #[arg(long, value_name = "FILE")]
+        map: PathBuf,
+        /// Robot pose `x_m,y_m,heading_deg` (default: the map's start pose).
+        #[arg(long, value_name = "X,Y,DEG", allow_hyphen_values = true)]
+        pose: Option<String>,
+        /// Output folder (created if missing).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// Image size.
+        #[arg(long, default_value = "640x480", value_parser = ["640x480", "320x240"])]
+        size: String,
+        /// Right-image gain (webcam defect).
+        #[arg(long, default_value_t = 1.0)]
+        gain: f32,
+        /// Right-image offset, grey levels.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        offset: f32,
+        /// Gaussian noise sigma on both images, grey levels.
+        #[arg(long, default_value_t = 0.0)]
+        noise: f32,
+        /// Vertical misalignment of the right image, px.
+        #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+        vertical_shift: i32,
+    },
+}
+
+/// Benchmarks.
+#[derive(Debug, Subcommand)]
+enum BenchCommand {
+    /// One-hop latency of 320x240 and 640x480 pairs between two processes: iceoryx2 zero copy
+    /// against a Unix-socket copy of the same bytes.
+    Ipc {
+        /// Frames per size and transport.
+        #[arg(long, default_value_t = 2000)]
+        count: u32,
+        /// Send rate, Hz.
+        #[arg(long, default_value_t = 500.0)]
+        rate: f64,
+    },
+    /// The receiving side of `hvs bench ipc` (started by it).
+    #[command(hide = true)]
+    IpcReceiver {
+        #[arg(long)]
+        instance: String,
+        #[arg(long, value_enum)]
+        size: bench::FrameSize,
+        #[arg(long, value_enum)]
+        transport: bench::Transport,
+        #[arg(long)]
+        count: u32,
+        #[arg(long)]
+        socket: PathBuf,
+    },
+}
+
+/// Which running pipeline a client command talks to.
+#[derive(Debug, clap::Args)]
+struct Target {
+    /// Instance name (default: the `instance` of --config, else "default").
+    #[arg(long, value_name = "NAME")]
+    instance: Option<String>,
+    /// Config whose `instance` to use.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+}
+
+impl Target {
+    fn instance(&self) -> anyhow::Result<String> {
+        if let Some(i) = &self.instance {
+            return Ok(i.clone());
+        }
+        if let Some(path) = &self.config {
+            return Ok(HvsConfig::load(path)?.instance);
+        }
+        Ok("default".to_string())
+    }
+}
+
+/// The default config: `config/sim.toml` in the current folder, else in the source tree.
+fn default_config() -> anyhow::Result<PathBuf> {
+    let local = PathBuf::from("config/sim.toml");
+    if local.is_file() {
+        return Ok(local);
+    }
+    let built_in = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/sim.toml");
+    if built_in.is_file() {
+        return Ok(built_in);
+    }
+    anyhow::bail!(
+        "no --config given and config/sim.toml not found in {}",
+        std::env::current_dir()?.display()
+    )
+}
+
+/// Checks that go beyond the config schema before anything is started: the simulator's map
+/// must parse (its errors name file, line and column).
+pub fn preflight(config: &HvsConfig) -> anyhow::Result<()> {
+    if config.stage_enabled("sim") {
+        let map = config.resolve_path(&config.sim.map);
+        hvs_sim::GridMap::load(&map)
+            .with_context(|| format!("config file {}: `sim.map`", config.source_path.display()))?;
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn sim_render(
+    map: &Path,
+    pose: Option<&str>,
+    out: &Path,
+    size: &str,
+    gain: f32,
+    offset: f32,
+    noise: f32,
+    vertical_shift: i32,
+) -> anyhow::Result<()> {
+    let pose = match pose {
+        Some(p) => p
+            .parse::<hvs_sim::Pose>()
+            .with_context(|| format!("--pose {p:?}"))?,
+        None => hvs_sim::GridMap::load(map)?.start_pose(),
+    };
+    let size = if size == "320x240" {
+        hvs_sim::RenderSize::Qvga
+    } else {
+        hvs_sim::RenderSize::Vga
+    };
+    let defects = hvs_sim::WebcamDefects {
+        gain,
+        offset,
+        noise_sigma: noise,
+        vertical_shift_px: vertical_shift,
+        right_delay_s: 0.0,
+    };
+    let files = hvs_sim::render_to_dir(map, &pose, out, size, &defects)?;
+    println!(
+        "rendered {} at ({:.2}, {:.2}) {:.1} deg: {}, {}, {}",
+        map.display(),
+        pose.x_m,
+        pose.y_m,
+        pose.heading_rad.to_degrees(),
+        files.left_png.display(),
+        files.right_png.display(),
+        files.gt_disp_png.display()
+    );
+    Ok(())
+}
+
+fn seconds(s: f64, what: &str) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(s)
+        .with_context(|| format!("{what} {s} is not a valid number of seconds"))
+}
+
+fn main() -> ExitCode {
+    hvs_shared::stage::init_tracing();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run {
+            config,
+            instance,
+            duration,
+            report,
+        } => (|| {
+            let config_path = match config {
+                Some(c) => c,
+                None => default_config()?,
+            };
+            let duration = duration.map(|d| seconds(d, "--duration")).transpose()?;
+            run::run(&run::RunOptions {
+                config_path,
+                instance,
+                duration,
+                report,
+            })
+        })(),
+        Command::Status { target, json } => {
+            target.instance().and_then(|i| control::status(&i, json))
+        }
+        Command::Restart {
+            stage,
+            target,
+            timeout,
+        } => target
+            .instance()
+            .and_then(|i| control::restart(&i, &stage, seconds(timeout, "--timeout")?)),
+        Command::Sim {
+            what:
+                SimCommand::Render {
+                    map,
+                    pose,
+                    out,
+                    size,
+                    gain,
+                    offset,
+                    noise,
+                    vertical_shift,
+                },
+        } => sim_render(
+            &map,
+            pose.as_deref(),
+            &out,
+            &size,
+            gain,
+            offset,
+            noise,
+            vertical_shift,
+        ),
+        Command::Bench { what } => match what {
+            BenchCommand::Ipc { count, rate } => bench::run_ipc(count, rate),
+            BenchCommand::IpcReceiver {
+                instance,
+                size,
+                transport,
+                count,
+                socket,
+            } => bench::run_receiver(&instance, size, transport, count, socket),
+        },
+        Command::Stop { target, timeout } => target
+            .instance()
+            .and_then(|i| control::stop(&i, seconds(timeout, "--timeout")?)),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let e: &(dyn std::error::Error + 'static) = e.as_ref();
+            eprintln!("hvs: error: {}", hvs_shared::error_chain(e));
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,338 @@
+//! Helpers for the end-to-end tests: start a real `hvs run` in its own instance, watch it
+//! through `hvs status --json` and through the pipeline's own shared-memory topics, and tear it
+//! down.
+//!
+//! The tests need the release binaries: the README's test command builds them first
+//! (`cargo build --release && cargo test --release`).
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use serde_json::Value;
+
+/// One pipeline at a time: each uses most of a 2-core machine.
+static PIPELINE_LOCK: Mutex<()> = Mutex::new(());
+static INSTANCE_COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// The repository root.
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from(".."))
+}
+
+/// Folder of the built binaries (the test executable lives in `<it>/deps/`).
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let deps = exe.parent().expect("deps folder");
+    deps.parent().expect("profile folder").to_path_buf()
+}
+
+/// Path of a built binary; panics with the build command if it is missing.
+pub fn bin(name: &str) -> PathBuf {
+    let p = bin_dir().join(name);
+    assert!(
+        p.is_file(),
+        "{} not found: build the workspace first (cargo build --release && cargo test --release)",
+        p.display()
+    );
+    p
+}
+
+/// A fresh instance name unique to this process and test.
+pub fn unique_instance(tag: &str) -> String {
+    format!(
+        "e2e{}-{}-{tag}",
+        std::process::id(),
+        INSTANCE_COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// Writes a config to `dir/name` based on config/sim.toml with `extra` appended (TOML tables
+/// in `extra` must not repeat tables of the base: use `base_overrides` to replace lines).
+pub fn write_config(
+    dir: &Path,
+    name: &str,
+    base_overrides: &[(&str, &str)],
+    extra: &str,
+) -> PathBuf {
+    let base =
+        std::fs::read_to_string(repo_root().join("config/sim.toml")).expect("config/sim.toml");
+    let mut text = base.replace(
+        "map = \"maps/maze.txt\"",
+        &format!(
+            "map = \"{}\"",
+            repo_root().join("config/maps/maze.txt").display()
+        ),
+    );
+    for (from, to) in base_overrides {
+        assert!(text.contains(from), "config/sim.toml has no line {from:?}");
+        text = text.replace(from, to);
+    }
+    text.push('\n');
+    text.push_str(extra);
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write config");
+    path
+}
+
+/// Runs `hvs` with arguments to completion.
+pub fn hvs(args: &[&str]) -> Output {
+    Command::new(bin("hvs"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run hvs")
+}
+
+/// A running `hvs run`, stopped when dropped.
+pub struct Pipeline {
+    /// Instance name.
+    pub instance: String,
+    /// The config file used.
+    pub config: PathBuf,
+    // Options only so that `restart_after` can hand them to the next run.
+    dir: Option<tempfile::TempDir>,
+    child: Option<Child>,
+    serial: Option<MutexGuard<'static, ()>>,
+    files_before: Vec<String>,
+}
+
+impl Pipeline {
+    /// Starts `hvs run` with config/sim.toml plus `extra` config text, in a fresh instance.
+    pub fn start(tag: &str, base_overrides: &[(&str, &str)], extra: &str) -> Self {
+        let serial = PIPELINE_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        let files_before = iceoryx_files();
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut p = Self::launch(unique_instance(tag), dir, base_overrides, extra, serial);
+        p.files_before = files_before;
+        p
+    }
+
+    /// iceoryx2 files that existed before this pipeline started (taken under the lock).
+    pub fn files_before(&self) -> &[String] {
+        &self.files_before
+    }
+
+    /// Starts another `hvs run` on the same instance and run folder as `previous` (which must
+    /// have stopped or been killed), keeping the one-pipeline-at-a-time lock.
+    pub fn restart_after(mut previous: Pipeline) -> Self {
+        if let Some(mut c) = previous.child.take() {
+            let _ = c.wait();
+        }
+        let instance = std::mem::take(&mut previous.instance);
+        let dir = previous.dir.take().expect("temp folder");
+        let serial = previous.serial.take().expect("pipeline lock");
+        let text = std::fs::read_to_string(&previous.config).expect("previous config");
+        Self::launch_with_text(instance, dir, &text, serial)
+    }
+
+    /// Temp folder with config, logs and report.
+    pub fn dir(&self) -> &Path {
+        self.dir
+            .as_ref()
+            .map_or(Path::new("/nonexistent"), |d| d.path())
+    }
+
+    fn launch(
+        instance: String,
+        dir: tempfile::TempDir,
+        base_overrides: &[(&str, &str)],
+        extra: &str,
+        serial: MutexGuard<'static, ()>,
+    ) -> Self {
+        let config = write_config(dir.path(), "hvs.toml", base_overrides, extra);
+        let text = std::fs::read_to_string(&config).expect("config");
+        Self::launch_with_text(instance, dir, &text, serial)
+    }
+
+    fn launch_with_text(
+        instance: String,
+        dir: tempfile::TempDir,
+        config_text: &str,
+        serial: MutexGuard<'static, ()>,
+    ) -> Self {
+        let config = dir.path().join("hvs.toml");
+        std::fs::write(&config, config_text).expect("write config");
+        let stdout = std::fs::File::create(dir.path().join("stdout.log")).expect("log file");
+        let stderr = std::fs::File::create(dir.path().join("stderr.log")).expect("log file");
+        let child = Command::new(bin("hvs"))
+            .args(["run", "--config"])
+            .arg(&config)
+            .args(["--instance", &instance, "--report"])
+            .arg(dir.path().join("report.json"))
+            .env("HVS_RUN_DIR", dir.path().join("run"))
+            .stdin(Stdio::null())
+            .stdout(stdout)
+            .stderr(stderr)
+            .spawn()
+            .expect("spawn hvs run");
+        Self {
+            instance,
+            dir: Some(dir),
+            config,
+            child: Some(child),
+            serial: Some(serial),
+            files_before: Vec::new(),
+        }
+    }
+
+    /// Pid of the supervisor.
+    pub fn supervisor_pid(&self) -> u32 {
+        self.child.as_ref().map_or(0, Child::id)
+    }
+
+    /// The supervisor's log so far (stdout and stderr), for failure messages.
+    pub fn logs(&self) -> String {
+        let read = |n: &str| std::fs::read_to_string(self.dir().join(n)).unwrap_or_default();
+        let tail = |s: String| {
+            let lines: Vec<&str> = s.lines().collect();
+            lines[lines.len().saturating_sub(60)..].join("\n")
+        };
+        format!(
+            "--- stdout ---\n{}\n--- stderr ---\n{}",
+            tail(read("stdout.log")),
+            tail(read("stderr.log"))
+        )
+    }
+
+    /// `hvs status --json` of this instance (None while no status is available).
+    pub fn status(&self) -> Option<Value> {
+        let out = hvs(&["status", "--json", "--instance", &self.instance]);
+        if !out.status.success() {
+            return None;
+        }
+        serde_json::from_slice(&out.stdout).ok()
+    }
+
+    /// Waits until `pred` holds for the status, or panics with the logs after `timeout`.
+    pub fn wait_status(
+        &self,
+        what: &str,
+        timeout: Duration,
+        pred: impl Fn(&Value) -> bool,
+    ) -> Value {
+        let deadline = Instant::now() + timeout;
+        let mut last = None;
+        while Instant::now() < deadline {
+            if let Some(s) = self.status() {
+                if pred(&s) {
+                    return s;
+                }
+                last = Some(s);
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        panic!(
+            "timed out after {timeout:?} waiting for: {what}\nlast status: {}\n{}",
+            last.map(|s| s.to_string()).unwrap_or_default(),
+            self.logs()
+        );
+    }
+
+    /// Waits until every enabled stage runs and has produced output.
+    pub fn wait_all_running(&self, timeout: Duration) -> Value {
+        self.wait_status("every stage running with output", timeout, |s| {
+            stages(s).iter().all(|st| {
+                let state = st["state"].as_str().unwrap_or("");
+                state == "disabled"
+                    || (state == "running" && st["frames_out"].as_u64().unwrap_or(0) > 0)
+            })
+        })
+    }
+
+    /// Sends a signal to the supervisor.
+    pub fn signal(&self, signal: Signal) {
+        kill(Pid::from_raw(self.supervisor_pid() as i32), signal).expect("signal supervisor");
+    }
+
+    /// Waits for the supervisor to exit and returns its exit code, or panics after `timeout`.
+    pub fn wait_exit(&mut self, timeout: Duration) -> i32 {
+        let deadline = Instant::now() + timeout;
+        let child = self.child.as_mut().expect("running");
+        loop {
+            if let Some(status) = child.try_wait().expect("poll hvs run") {
+                self.child = None;
+                return status.code().unwrap_or(-1);
+            }
+            if Instant::now() > deadline {
+                panic!("hvs run did not exit within {timeout:?}\n{}", self.logs());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// The report written at the end of the run.
+    pub fn report(&self) -> Value {
+        let text = std::fs::read_to_string(self.dir().join("report.json"))
+            .unwrap_or_else(|e| panic!("no report.json ({e})\n{}", self.logs()));
+        serde_json::from_str(&text).expect("report is JSON")
+    }
+}
+
+impl Drop for Pipeline {
+    fn drop(&mut self) {
+        if let Some(child) = self.child.as_mut() {
+            let _ = kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM);
+            let deadline = Instant::now() + Duration::from_secs(10);
+            while Instant::now() < deadline {
+                if let Ok(Some(_)) = child.try_wait() {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// The `stages` array of a status.
+pub fn stages(status: &Value) -> Vec<Value> {
+    status["stages"].as_array().cloned().unwrap_or_default()
+}
+
+/// One stage's entry of a status.
+pub fn stage(status: &Value, name: &str) -> Value {
+    stages(status)
+        .into_iter()
+        .find(|s| s["stage"] == name)
+        .unwrap_or_else(|| panic!("no stage {name} in {status}"))
+}
+
+/// Pid of a stage in a status.
+pub fn pid_of(status: &Value, name: &str) -> u32 {
+    stage(status, name)["pid"].as_u64().unwrap_or(0) as u32
+}
+
+/// Sends a signal to a process.
+pub fn signal_pid(pid: u32, signal: Signal) {
+    kill(Pid::from_raw(pid as i32), signal)
+        .unwrap_or_else(|e| panic!("signal {signal} to {pid}: {e}"));
+}
+
+/// The files iceoryx2 keeps in /dev/shm and /tmp/iceoryx2 (to check nothing leaks), except
+/// its domain-wide node counter (`*.global_mgmt`), which iceoryx2 creates once without owner
+/// and keeps by design.
+pub fn iceoryx_files() -> Vec<String> {
+    let mut files = Vec::new();
+    for dir in ["/dev/shm", "/tmp/iceoryx2/services", "/tmp/iceoryx2/nodes"] {
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for e in entries.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let ours = dir != "/dev/shm" || name.starts_with("iox2_");
+                if ours && !name.ends_with(".global_mgmt") {
+                    files.push(format!("{dir}/{name}"));
+                }
+            }
+        }
+    }
+    files.sort();
+    files
+}
