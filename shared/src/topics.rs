@@ -26,6 +26,7 @@
 //! |---|---|---|---|
 //! | `sim/camera/640x480` | [`StereoFrame640x480`] | sim | capture |
 //! | `sim/truth` | [`SimTruth`] | sim | supervisor, probe, tests |
+//! | `sim/gt_disparity/640x480` | [`DisparityMap640x480`] | sim | probe, tests (scoring) |
 //! | `frames/320x240` | [`StereoFrame320x240`] | capture | stereo-lo, fusion, probe |
 //! | `frames/640x480` | [`StereoFrame640x480`] | capture | stereo-hi, fusion, probe |
 //! | `disparity/320x240` | [`DisparityMap320x240`] | stereo-lo | fusion, probe |
@@ -119,6 +120,8 @@ impl<T> Topic<T> {
 
 /// Raw camera pairs rendered by the simulator (the simulated Minoru).
 pub const SIM_CAMERA: Topic<StereoFrame640x480> = Topic::frames("sim/camera/640x480");
+/// Exact disparity of the simulated left image (same frame ids as `sim/camera/640x480`).
+pub const SIM_GT_DISPARITY: Topic<DisparityMap640x480> = Topic::frames("sim/gt_disparity/640x480");
 /// Simulator ground truth: pose, collisions, pulses.
 pub const SIM_TRUTH: Topic<SimTruth> = Topic::new("sim/truth");
 /// Fast-path pairs, 320x240.
@@ -144,8 +147,9 @@ pub const SUPERVISOR_CONTROL: Topic<ControlRequest> =
     Topic::new("supervisor/control").with_publishers(4);
 
 /// Every fixed topic path with its iceoryx2 payload type name, for discovery by probes.
-pub const ALL_TOPIC_PATHS: [(&str, &str); 11] = [
+pub const ALL_TOPIC_PATHS: [(&str, &str); 12] = [
     (SIM_CAMERA.path, "hvs::StereoFrame640x480"),
+    (SIM_GT_DISPARITY.path, "hvs::DisparityMap640x480"),
     (SIM_TRUTH.path, "hvs::SimTruth"),
     (FRAMES_LO.path, "hvs::StereoFrame320x240"),
     (FRAMES_HI.path, "hvs::StereoFrame640x480"),

@@ -338,3 +338,46 @@ where
     }
     Ok(())
 }
+
+/// `hvs bench pipeline`: the whole pipeline in its own instance for `duration`, then a table.
+pub fn run_pipeline(config: PathBuf, duration: Duration) -> anyhow::Result<()> {
+    let report = crate::run::run(&crate::run::RunOptions {
+        config_path: config,
+        instance: Some(format!("bench{}", std::process::id())),
+        duration: Some(duration),
+        report: None,
+    })?;
+    let secs = report.duration_s.max(1e-3);
+    println!();
+    println!("pipeline over {:.1} s", report.duration_s);
+    println!(
+        "{:<10} {:>9} {:>9} {:>9} {:>8} {:>8}",
+        "stage", "in", "out", "out Hz", "drops", "restarts"
+    );
+    for s in &report.stages {
+        println!(
+            "{:<10} {:>9} {:>9} {:>9.1} {:>8} {:>8}",
+            s.stage,
+            s.frames_in,
+            s.frames_out,
+            s.frames_out as f64 / secs,
+            s.drops,
+            s.restarts
+        );
+    }
+    let l = &report.latency;
+    println!(
+        "{:<22} {:>7} {:>9} {:>9} {:>9}",
+        "latency", "count", "p50 ms", "p99 ms", "max ms"
+    );
+    for (name, v) in [
+        ("capture -> decision", &l.capture_to_decision),
+        ("capture -> command", &l.capture_to_command),
+    ] {
+        println!(
+            "{:<22} {:>7} {:>9.2} {:>9.2} {:>9.2}",
+            name, v.count, v.p50_ms, v.p99_ms, v.max_ms
+        );
+    }
+    Ok(())
+}

@@ -127,6 +127,16 @@ enum BenchCommand {
         #[arg(long, default_value_t = 500.0)]
         rate: f64,
     },
+    /// Run the simulated pipeline for a while and print capture-to-decision and
+    /// capture-to-command latency, per-stage rates and drops.
+    Pipeline {
+        /// Pipeline configuration (default: config/sim.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// How long to run, seconds.
+        #[arg(long, default_value_t = 20.0)]
+        duration: f64,
+    },
     /// The receiving side of `hvs bench ipc` (started by it).
     #[command(hide = true)]
     IpcReceiver {
@@ -262,6 +272,7 @@ fn main() -> ExitCode {
                 duration,
                 report,
             })
+            .map(|_| ())
         })(),
         Command::Status { target, json } => {
             target.instance().and_then(|i| control::status(&i, json))
@@ -297,6 +308,13 @@ fn main() -> ExitCode {
         ),
         Command::Bench { what } => match what {
             BenchCommand::Ipc { count, rate } => bench::run_ipc(count, rate),
+            BenchCommand::Pipeline { config, duration } => (|| {
+                let config = match config {
+                    Some(c) => c,
+                    None => default_config()?,
+                };
+                bench::run_pipeline(config, seconds(duration, "--duration")?)
+            })(),
             BenchCommand::IpcReceiver {
                 instance,
                 size,

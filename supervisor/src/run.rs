@@ -172,7 +172,7 @@ fn resolve_program(bin_dir: &Path, program: &str) -> PathBuf {
 }
 
 /// Runs the pipeline until SIGINT/SIGTERM, `hvs stop` or the duration ends.
-pub fn run(opts: &RunOptions) -> anyhow::Result<()> {
+pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     let mut config = HvsConfig::load(&opts.config_path)?;
     if let Some(instance) = &opts.instance {
         hvs_shared::config::validate_instance_name(instance)
@@ -345,7 +345,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write report {}", path.display()))?;
         println!("hvs: report written to {}", path.display());
     }
-    Ok(())
+    Ok(report)
 }
 
 struct Supervisor {

@@ -1,7 +1,8 @@
 //! Simulator stage process: the default world of `hvs run`.
 //!
 //! Renders the simulated Minoru's 640x480 pair at camera rate directly into a loaned
-//! shared-memory sample (`sim/camera/640x480`), serves the emulated Parallax Servo Controller on
+//! shared-memory sample (`sim/camera/640x480`) with its exact disparity
+//! (`sim/gt_disparity/640x480`), serves the emulated Parallax Servo Controller on
 //! a pseudo-terminal that the actuator opens like `/dev/ttyUSB0`, drives the robot from the
 //! pulses it receives, and publishes the ground truth (`sim/truth`).
 
@@ -10,7 +11,9 @@ use std::time::Duration;
 
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::config::{run_dir, sim_pty_path};
-use hvs_shared::messages::{FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, SimTruth};
+use hvs_shared::messages::{
+    DisparityHeader, FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, SimTruth,
+};
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 use hvs_sim::{GridMap, PscPty, SimClock, SimConfig, SimWorld, StereoRig, WebcamDefects, lock_psc};
@@ -64,6 +67,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         pty.slave_path().display()
     );
     let mut camera = rt.node.publisher(&topics::SIM_CAMERA)?;
+    let mut gt_disparity = rt.node.publisher(&topics::SIM_GT_DISPARITY)?;
     let mut truth = rt.node.publisher(&topics::SIM_TRUTH)?;
     rt.set_note(format!("{}", pty.slave_path().display()));
 
@@ -88,12 +92,39 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 return Ok(LoopControl::Continue);
             }
         };
+        let mut gt = match gt_disparity.loan() {
+            Ok(s) => s,
+            Err(e) => {
+                rt.report_publish_error(&e);
+                return Ok(LoopControl::Continue);
+            }
+        };
         let frame = sample.payload_mut();
-        if let Err(e) = world.render(t, &mut frame.left, &mut frame.right, None) {
+        let gt_map = gt.payload_mut();
+        let rendered = world.render(
+            t,
+            &mut frame.left,
+            &mut frame.right,
+            Some(&mut gt_map.disparity_q8),
+        );
+        if let Err(e) = rendered {
             rt.report_error("render", &e);
             return Ok(LoopControl::Continue);
         }
         frame_id += 1;
+        gt_map.header = DisparityHeader {
+            frame_id,
+            capture_ns,
+            frame_received_ns: capture_ns,
+            published_ns: monotonic_ns(),
+            compute_ns: 0,
+            width: HI_WIDTH as u32,
+            height: HI_HEIGHT as u32,
+            min_disp: 0,
+            max_disp: 0,
+            algorithm: 0,
+            valid_px: HI_WIDTH as u32 * HI_HEIGHT as u32,
+        };
         frame.header = FrameHeader {
             frame_id,
             capture_ns,
@@ -107,6 +138,9 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             reserved: 0,
         };
         rt.send_or_report(&mut camera, sample, monotonic_ns() - capture_ns);
+        if let Err(e) = gt_disparity.send(gt) {
+            rt.report_publish_error(&e);
+        }
 
         let gt = world.ground_truth();
         let counters = lock_psc(&world.psc()).counters();
