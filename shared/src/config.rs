@@ -207,8 +207,9 @@ impl Default for StereoPaths {
     }
 }
 
-/// Stereo settings of one path.
-#[derive(Debug, Clone, Deserialize, Serialize)]
+/// Stereo settings of one path. Every algorithm reads the common keys; `[...bm]`, `[...sgm]`
+/// and `[...ogale]` hold the settings only that family uses.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct StereoConfig {
     /// The matching algorithm.
@@ -217,20 +218,134 @@ pub struct StereoConfig {
     pub min_disp: u32,
     /// Largest disparity searched, px (inclusive).
     pub max_disp: u32,
-    /// Block size for block matching (odd).
+    /// Block size for block matching (odd, 3..=31).
     pub window: u32,
     /// Scale the right image so its mean equals the left's before matching (reference step 2).
     pub equalize: bool,
+    /// Reject a match unless its cost is this many percent below every match more than one
+    /// disparity away (0 disables).
+    pub uniqueness_pct: u32,
+    /// Left-right consistency check: the right image's disparity must agree within
+    /// `lr_max_diff_px`.
+    pub lr_check: bool,
+    /// Allowed left-right disagreement, px.
+    pub lr_max_diff_px: u32,
+    /// Subpixel refinement of the winning disparity.
+    pub subpixel: bool,
+    /// Remove connected regions of at most this many pixels whose disparities differ from
+    /// their surroundings (speckles; 0 disables).
+    pub speckle_window_px: u32,
+    /// Neighbouring disparities within this many px belong to the same region.
+    pub speckle_range_px: u32,
+    /// Block-matching settings.
+    pub bm: BlockMatchConfig,
+    /// Semi-global matching settings.
+    pub sgm: SgmConfig,
+    /// Ogale & Aloimonos settings.
+    pub ogale: OgaleConfig,
 }
 
 impl Default for StereoConfig {
     fn default() -> Self {
         Self {
-            algorithm: StereoAlgorithm::BmSad,
+            algorithm: StereoAlgorithm::Sgm,
             min_disp: 9,
             max_disp: 55,
-            window: 9,
+            window: 15,
             equalize: true,
+            uniqueness_pct: 5,
+            lr_check: true,
+            lr_max_diff_px: 1,
+            subpixel: true,
+            speckle_window_px: 40,
+            speckle_range_px: 1,
+            bm: BlockMatchConfig::default(),
+            sgm: SgmConfig::default(),
+            ogale: OgaleConfig::default(),
+        }
+    }
+}
+
+/// Settings of the block-matching family (`bm-sad`, `bm-ssd`, `bm-ncc`, `bm-census`).
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct BlockMatchConfig {
+    /// Minimum mean |horizontal gradient| of the left window, grey levels per pixel; flatter
+    /// windows come out invalid rather than matched by chance (0 disables).
+    pub texture_threshold: u32,
+    /// Census window for `bm-census` (odd width x odd height, at most 32 comparisons).
+    pub census_width: u32,
+    /// Census window height.
+    pub census_height: u32,
+}
+
+impl Default for BlockMatchConfig {
+    fn default() -> Self {
+        Self {
+            texture_threshold: 0,
+            census_width: 5,
+            census_height: 5,
+        }
+    }
+}
+
+/// Settings of semi-global matching (`sgm`).
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SgmConfig {
+    /// Penalty for a disparity change of 1 px between neighbours, in matching-cost units
+    /// (twice the mean census Hamming distance over the block: 0..=48).
+    pub p1: u32,
+    /// Penalty for larger disparity changes (at most 79, so that path costs fit a byte).
+    pub p2: u32,
+    /// Aggregation paths: 4, 5 or 8.
+    pub paths: u32,
+    /// Side of the square block the census costs are averaged over before the paths
+    /// (1, 3, 5 or 7; OpenCV's `blockSize`): larger blocks resist noise and vertical
+    /// misalignment, smaller ones keep thin structures.
+    pub block: u32,
+    /// Minimum mean |horizontal gradient| of the (prefiltered) left image around a pixel,
+    /// grey levels per pixel; flatter pixels come out invalid rather than filled in by the
+    /// paths (0 disables). Raise it for noisier cameras (see docs/stereo.md).
+    pub texture_threshold: f32,
+    /// Radius of the square window the texture is measured over, px.
+    pub texture_radius: u32,
+}
+
+impl Default for SgmConfig {
+    fn default() -> Self {
+        Self {
+            p1: 16,
+            p2: 64,
+            paths: 5,
+            block: 5,
+            texture_threshold: 0.25,
+            texture_radius: 5,
+        }
+    }
+}
+
+/// Settings of the Ogale & Aloimonos matcher (`ogale`).
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct OgaleConfig {
+    /// Two pixels match at a shift when their (Birchfield-Tomasi) difference is at most this.
+    pub match_threshold: u32,
+    /// Horizontal stretch factors tried for slanted surfaces (1.0 = fronto-parallel).
+    pub stretch: Vec<f32>,
+    /// Cut vertical links where a horizontal edge separates two pixels.
+    pub cut_horizontal_edges: bool,
+    /// Vertical grey difference that counts as a horizontal edge.
+    pub edge_threshold: u32,
+}
+
+impl Default for OgaleConfig {
+    fn default() -> Self {
+        Self {
+            match_threshold: 4,
+            stretch: vec![1.0],
+            cut_horizontal_edges: true,
+            edge_threshold: 8,
         }
     }
 }
@@ -605,10 +720,70 @@ impl HvsConfig {
                     ),
                 ));
             }
-            if cfg.window % 2 == 0 || !(3..=31).contains(&cfg.window) {
+            if cfg.window.is_multiple_of(2) || !(3..=31).contains(&cfg.window) {
                 return Err(self.invalid(
                     &format!("{key}.window"),
                     format!("= {} must be odd and in 3..=31", cfg.window),
+                ));
+            }
+            if cfg.max_disp - cfg.min_disp + 1 > 256 {
+                return Err(self.invalid(
+                    &format!("{key}.max_disp"),
+                    format!(
+                        "searches {} disparities; at most 256 are supported",
+                        cfg.max_disp - cfg.min_disp + 1
+                    ),
+                ));
+            }
+            if cfg.uniqueness_pct > 100 {
+                return Err(self.invalid(
+                    &format!("{key}.uniqueness_pct"),
+                    format!("= {} must be in 0..=100", cfg.uniqueness_pct),
+                ));
+            }
+            let (cw, ch) = (cfg.bm.census_width, cfg.bm.census_height);
+            if cw.is_multiple_of(2) || ch.is_multiple_of(2) || cw * ch > 33 || cw * ch < 9 {
+                return Err(self.invalid(
+                    &format!("{key}.bm.census_width"),
+                    format!("census window {cw}x{ch} must be odd x odd with 9..=33 pixels"),
+                ));
+            }
+            if !matches!(cfg.sgm.paths, 4 | 5 | 8) {
+                return Err(self.invalid(
+                    &format!("{key}.sgm.paths"),
+                    format!("= {} must be 4, 5 or 8", cfg.sgm.paths),
+                ));
+            }
+            if cfg.sgm.p1 == 0 || cfg.sgm.p2 <= cfg.sgm.p1 || cfg.sgm.p2 > 79 {
+                return Err(self.invalid(
+                    &format!("{key}.sgm.p2"),
+                    format!(
+                        "penalties p1 = {}, p2 = {} need 0 < p1 < p2 <= 79",
+                        cfg.sgm.p1, cfg.sgm.p2
+                    ),
+                ));
+            }
+            if !(0.0..=64.0).contains(&cfg.sgm.texture_threshold) || cfg.sgm.texture_radius > 15 {
+                return Err(self.invalid(
+                    &format!("{key}.sgm.texture_threshold"),
+                    format!(
+                        "texture_threshold = {} (0..=64) or texture_radius = {} (at most 15) out of range",
+                        cfg.sgm.texture_threshold, cfg.sgm.texture_radius
+                    ),
+                ));
+            }
+            if !matches!(cfg.sgm.block, 1 | 3 | 5 | 7) {
+                return Err(self.invalid(
+                    &format!("{key}.sgm.block"),
+                    format!("= {} must be 1, 3, 5 or 7", cfg.sgm.block),
+                ));
+            }
+            if cfg.ogale.stretch.is_empty()
+                || cfg.ogale.stretch.iter().any(|m| !(0.25..=4.0).contains(m))
+            {
+                return Err(self.invalid(
+                    &format!("{key}.ogale.stretch"),
+                    "needs at least one factor, each in 0.25..=4.0",
                 ));
             }
         }

@@ -5,6 +5,7 @@ mod control;
 mod process;
 mod report;
 mod run;
+mod stereo_cli;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -60,6 +61,62 @@ enum Command {
         /// Give up waiting for the new process after this many seconds.
         #[arg(long, default_value_t = 15.0, value_name = "SECONDS")]
         timeout: f64,
+    },
+    /// Compute one disparity map: `--left L.png --right R.png --out D.png` (16-bit PNG,
+    /// disparity x 256, 0 = invalid: the KITTI convention).
+    Stereo {
+        /// Algorithm: bm-sad, bm-ssd, bm-ncc, bm-census, ogale, sgm (default: the config's).
+        #[arg(long)]
+        algo: Option<String>,
+        /// Left image (PNG; colour is converted to grey).
+        #[arg(long, value_name = "FILE")]
+        left: PathBuf,
+        /// Right image.
+        #[arg(long, value_name = "FILE")]
+        right: PathBuf,
+        /// Output disparity PNG.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Smallest disparity searched, px.
+        #[arg(long)]
+        min_disp: Option<u32>,
+        /// Largest disparity searched, px.
+        #[arg(long)]
+        max_disp: Option<u32>,
+        #[command(flatten)]
+        base: stereo_cli::StereoBase,
+    },
+    /// Score stereo algorithms on every scene of a dataset folder (bad-1, bad-2, density,
+    /// ms per frame), optionally also with webcam defects.
+    Eval {
+        /// Algorithm, comma-separated list, `all`, or `none` (with --export only).
+        #[arg(long, default_value = "sgm")]
+        algo: String,
+        /// Dataset folder (one sub-folder per scene, like ../shared/datasets).
+        #[arg(long, value_name = "DIR")]
+        dataset: PathBuf,
+        /// Also score with webcam defects on the right image (gain 0.8, offset +10, noise
+        /// sigma 4, 1 px vertical shift).
+        #[arg(long)]
+        degrade: bool,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+        /// Matching runs per scene for the timing (median reported).
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+        /// Write each scene's grey (and degraded) inputs here, for external matchers.
+        #[arg(long, value_name = "DIR")]
+        export: Option<PathBuf>,
+        /// Score `<scene>-<clean|degraded>.png` disparity maps from this folder instead of
+        /// running a matcher (label the rows with --algo).
+        #[arg(long, value_name = "DIR")]
+        predictions: Option<PathBuf>,
+        /// Save our disparity maps here.
+        #[arg(long, value_name = "DIR")]
+        save: Option<PathBuf>,
+        #[command(flatten)]
+        base: stereo_cli::StereoBase,
     },
     /// Simulator tools.
     Sim {
@@ -136,6 +193,27 @@ enum BenchCommand {
         /// How long to run, seconds.
         #[arg(long, default_value_t = 20.0)]
         duration: f64,
+    },
+    /// Time stereo matchers on the built-in simulated hallway pair: median ms per frame and
+    /// million disparity evaluations per second, one thread.
+    Stereo {
+        /// Algorithm, comma-separated list, or `all`.
+        #[arg(long, default_value = "sgm")]
+        algo: String,
+        /// 320x240 (disparities 9..55), 640x480 (18..110) or both.
+        #[arg(long, default_value = "both")]
+        size: String,
+        /// Timed frames per algorithm and size.
+        #[arg(long, default_value_t = 50)]
+        frames: usize,
+        /// Also write the benchmark pairs as PNG here (for the OpenCV comparison).
+        #[arg(long, value_name = "DIR")]
+        export: Option<PathBuf>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        base: stereo_cli::StereoBase,
     },
     /// The receiving side of `hvs bench ipc` (started by it).
     #[command(hide = true)]
@@ -284,6 +362,46 @@ fn main() -> ExitCode {
         } => target
             .instance()
             .and_then(|i| control::restart(&i, &stage, seconds(timeout, "--timeout")?)),
+        Command::Stereo {
+            algo,
+            left,
+            right,
+            out,
+            min_disp,
+            max_disp,
+            base,
+        } => stereo_cli::stereo(
+            algo.as_deref(),
+            &left,
+            &right,
+            &out,
+            min_disp,
+            max_disp,
+            &base,
+        ),
+        Command::Eval {
+            algo,
+            dataset,
+            degrade,
+            json,
+            repeat,
+            export,
+            predictions,
+            save,
+            base,
+        } => stereo_cli::eval(
+            &stereo_cli::EvalOptions {
+                algo,
+                dataset,
+                degrade,
+                json,
+                repeat,
+                export,
+                predictions,
+                save,
+            },
+            &base,
+        ),
         Command::Sim {
             what:
                 SimCommand::Render {
@@ -308,6 +426,14 @@ fn main() -> ExitCode {
         ),
         Command::Bench { what } => match what {
             BenchCommand::Ipc { count, rate } => bench::run_ipc(count, rate),
+            BenchCommand::Stereo {
+                algo,
+                size,
+                frames,
+                export,
+                json,
+                base,
+            } => stereo_cli::bench(&algo, &size, frames, export.as_deref(), json, &base),
             BenchCommand::Pipeline { config, duration } => (|| {
                 let config = match config {
                     Some(c) => c,

@@ -255,10 +255,7 @@ fn bad_configs_fail_with_a_message_naming_the_fault() {
     let cases: [Case; 4] = [
         (
             "unknown key",
-            &[(
-                "algorithm = \"bm-sad\"\nmin_disp = 9",
-                "algorithm = \"bm-sad\"\nwindw = 3\nmin_disp = 9",
-            )],
+            &[("min_disp = 9 ", "windw = 3\nmin_disp = 9 ")],
             "",
             &["windw", "line"],
         ),

@@ -4,14 +4,28 @@
 //! names. Output is a disparity map of the left image in 1/256 px (`u16`, 0 = invalid), the
 //! KITTI convention also used on the wire ([`hvs_shared::messages::DISPARITY_SCALE`]).
 //! Convention: a left pixel `(x, y)` with disparity `d` matches the right pixel `(x - d, y)`.
+//!
+//! - [`block`]: correlation block matching with SAD, SSD, NCC or census costs;
+//! - [`sgm`]: census + semi-global matching;
+//! - [`ogale`]: Ogale & Aloimonos shape-and-stereo correspondence;
+//! - [`census`], [`post`], [`equalize`]: building blocks shared by them;
+//! - [`eval`]: scoring against ground truth; [`synthetic`]: pairs with known disparity.
 
 pub mod block;
+pub mod census;
 pub mod equalize;
+pub mod eval;
+pub mod ogale;
+pub mod post;
+pub mod sgm;
+pub mod synthetic;
 
 use hvs_shared::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 
-pub use block::{BlockMatcher, BlockParams};
+pub use block::BlockMatcher;
+pub use ogale::OgaleMatcher;
+pub use sgm::SgmMatcher;
 
 /// A borrowed grey image, row-major, one byte per pixel, no row padding.
 #[derive(Debug, Clone, Copy)]
@@ -82,7 +96,7 @@ pub enum StereoError {
     },
     /// The image is too small for the disparity range and window.
     #[error(
-        "image {width}x{height} is too small for disparities up to {max_disp} with a {window}x{window} window"
+        "image {width}x{height} is too small for disparities up to {max_disp} with a {window}x{window} window (it must be wider than the largest disparity plus the window)"
     )]
     ImageTooSmall {
         /// Width.
@@ -97,9 +111,6 @@ pub enum StereoError {
     /// A parameter is out of its range.
     #[error("{0}")]
     BadParameter(String),
-    /// The algorithm is not available in this build.
-    #[error("stereo algorithm `{0}` is not implemented yet")]
-    Unsupported(&'static str),
 }
 
 /// Statistics of one computed map.
@@ -149,19 +160,43 @@ pub fn check_pair(
     Ok(())
 }
 
+/// Checks that an image is wider than the disparity range plus the matching window and at
+/// least a window high.
+pub fn check_fits(image: &ImageView<'_>, max_disp: u32, window: u32) -> Result<(), StereoError> {
+    let (w, h) = (image.width, image.height);
+    if w <= (max_disp + window) as usize || h < window as usize {
+        return Err(StereoError::ImageTooSmall {
+            width: w,
+            height: h,
+            max_disp,
+            window,
+        });
+    }
+    Ok(())
+}
+
+/// Checks a disparity range on its own: it must not be empty (`max_disp > min_disp`).
+pub fn check_range(min_disp: u32, max_disp: u32) -> Result<(), StereoError> {
+    if max_disp <= min_disp {
+        return Err(StereoError::BadRange {
+            min: min_disp,
+            max: max_disp,
+        });
+    }
+    Ok(())
+}
+
 /// Builds the matcher a stereo config section describes.
 pub fn matcher_for(config: &StereoConfig) -> Result<Box<dyn StereoMatcher>, StereoError> {
-    let params = BlockParams {
-        min_disp: config.min_disp,
-        max_disp: config.max_disp,
-        window: config.window,
-        equalize: config.equalize,
-        ..BlockParams::default()
-    };
-    match config.algorithm {
-        StereoAlgorithm::BmSad => Ok(Box::new(BlockMatcher::new(params)?)),
-        other => Err(StereoError::Unsupported(other.name())),
-    }
+    check_range(config.min_disp, config.max_disp)?;
+    Ok(match config.algorithm {
+        StereoAlgorithm::BmSad
+        | StereoAlgorithm::BmSsd
+        | StereoAlgorithm::BmNcc
+        | StereoAlgorithm::BmCensus => Box::new(BlockMatcher::from_config(config)?),
+        StereoAlgorithm::Sgm => Box::new(SgmMatcher::from_config(config)?),
+        StereoAlgorithm::Ogale => Box::new(OgaleMatcher::from_config(config)?),
+    })
 }
 
 /// Converts a disparity in 1/256 px to pixels (`None` for the invalid marker 0).
