@@ -135,8 +135,12 @@ pub struct CameraConfig {
     pub fps: f64,
     /// Focal length at 320x240 in pixels (doubled at 640x480).
     pub focal_px_320: f64,
-    /// Stereo baseline in metres.
+    /// Stereo baseline in metres. (`focal_px_320 = 380`, `baseline_m = 0.0604` is the
+    /// reference's profile: its printed ranges are `380 * 0.1982 ft / d`.)
     pub baseline_m: f64,
+    /// Height of the optical centres above the floor, metres (level camera assumed): fusion
+    /// uses it to drop floor and ceiling points.
+    pub height_m: f64,
 }
 
 impl Default for CameraConfig {
@@ -145,6 +149,7 @@ impl Default for CameraConfig {
             fps: 30.0,
             focal_px_320: 320.0,
             baseline_m: 0.060,
+            height_m: 0.25,
         }
     }
 }
@@ -358,12 +363,28 @@ pub enum RangeStatistic {
     Mean,
     /// Median.
     Median,
+    /// Mean of the middle 60 % (20 % trimmed off each end).
+    TrimmedMean,
+    /// The `near_percentile` percentile: the nearest obstacle, robust to a few outliers.
+    Percentile,
+}
+
+/// Edge detector of the fusion stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EdgeDetector {
+    /// Canny (the reference): smoothing, Sobel, non-maximum suppression, hysteresis.
+    Canny,
+    /// Sobel magnitude above `canny_high` (the reference compared it and found it worse).
+    Sobel,
 }
 
 /// Edges, fused map and ranges.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FusionConfig {
+    /// Edge detector.
+    pub edges: EdgeDetector,
     /// Canny low threshold on the gradient magnitude (|gx| + |gy| of a 3x3 Sobel).
     pub canny_low: u32,
     /// Canny high threshold.
@@ -374,16 +395,30 @@ pub struct FusionConfig {
     pub statistic: RangeStatistic,
     /// A 640x480 result older than this (relative to the fast-path frame) is not fused.
     pub hi_max_age_ms: u64,
+    /// Percentile reported as `near_m` (and used by the `percentile` statistic), 0..=50.
+    pub near_percentile: f64,
+    /// Points lower than this above the floor are floor, not obstacles (0 disables).
+    pub min_height_m: f64,
+    /// Points higher than this above the floor are ignored (ceiling; 0 disables).
+    pub max_height_m: f64,
+    /// A fast-path window with fewer valid pixels than this takes a fresh 640x480 value
+    /// instead (the fast path cannot see beyond its disparity range).
+    pub min_valid_px: u32,
 }
 
 impl Default for FusionConfig {
     fn default() -> Self {
         Self {
+            edges: EdgeDetector::Canny,
             canny_low: 60,
             canny_high: 150,
             windows: 3,
             statistic: RangeStatistic::Mean,
             hi_max_age_ms: 300,
+            near_percentile: 10.0,
+            min_height_m: 0.05,
+            max_height_m: 1.5,
+            min_valid_px: 30,
         }
     }
 }
@@ -401,19 +436,86 @@ pub struct WallThresholds {
 /// Feet to metres.
 pub const M_PER_FT: f64 = 0.3048;
 
+/// Decision policies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DecisionPolicy {
+    /// The reference: crisp thresholds, the table's first option, no memory.
+    Reference,
+    /// Fuzzy walls with hysteresis, the navigation table, visit memory (the default).
+    Fuzzy,
+    /// Kostavelis et al.: the window with the smallest disparity sum is the freest.
+    MeanEstimation,
+    /// Free ahead unless `threshold_rate_pct` of the middle window is nearer than the front
+    /// threshold; otherwise toward the farther side.
+    ThresholdEstimation,
+}
+
+/// Odometry model of the robot (dead reckoning from the pulses actually sent).
+#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct OdometryConfig {
+    /// Wheel speed at the forward pulses, m/s (reference: 0.274).
+    pub forward_speed_mps: f64,
+    /// Effective skid-steer track width, metres.
+    pub track_m: f64,
+    /// Motor time constant, seconds.
+    pub motor_tau_s: f64,
+}
+
+impl Default for OdometryConfig {
+    fn default() -> Self {
+        Self {
+            forward_speed_mps: 0.274,
+            track_m: 0.55,
+            motor_tau_s: 0.1,
+        }
+    }
+}
+
 /// Walls, intersections and navigation.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DecisionConfig {
+    /// The policy.
+    pub policy: DecisionPolicy,
     /// Thresholds for the 320x240 ranges (reference: a = 2.35 ft, b = 2.4 ft).
     pub lo: WallThresholds,
     /// Thresholds for the 640x480 ranges (reference: a = 6.5 ft, b = 7 ft).
     pub hi: WallThresholds,
+    /// Half-width of the fuzzy band around a threshold, as a fraction of it: membership
+    /// falls from 1 to 0 over `threshold * (1 ± band)`.
+    pub fuzzy_band: f64,
+    /// Corridor rule: with the front open and both sides nearer than it, a side up to this
+    /// many times `a` still counts as a wall (side windows see hallway walls obliquely).
+    pub corridor_factor: f64,
+    /// Weight of the newest frame in the smoothed memberships (1 = no smoothing).
+    pub smoothing: f64,
+    /// Frames a new command must persist before it replaces the current one (Stop and
+    /// Reverse for a near front wall act at once).
+    pub hold_frames: u32,
+    /// Prefer the least visited branch at a junction (dead-reckoned visit grid).
+    pub visit_memory: bool,
+    /// Cell size of the visit grid, metres.
+    pub visit_cell_m: f64,
+    /// After a turn, drive at least this far before taking another branch, metres.
+    pub commit_m: f64,
+    /// Smallest turn executed, degrees (the reference's acos angle can be tiny).
+    pub min_turn_deg: f64,
+    /// Turns end on a multiple of this heading, degrees, and the heading is held on that axis
+    /// while driving (indoor hallways meet at right angles); 0 turns by the reference's
+    /// `acos` angle instead.
+    pub snap_turn_deg: f64,
+    /// Threshold estimation: share of the middle window that must be near to block it, %.
+    pub threshold_rate_pct: f64,
+    /// Odometry model for dead reckoning.
+    pub odometry: OdometryConfig,
 }
 
 impl Default for DecisionConfig {
     fn default() -> Self {
         Self {
+            policy: DecisionPolicy::Fuzzy,
             lo: WallThresholds {
                 side_m: 2.35 * M_PER_FT,
                 front_m: 2.4 * M_PER_FT,
@@ -422,6 +524,17 @@ impl Default for DecisionConfig {
                 side_m: 6.5 * M_PER_FT,
                 front_m: 7.0 * M_PER_FT,
             },
+            fuzzy_band: 0.065,
+            corridor_factor: 1.34,
+            smoothing: 0.5,
+            hold_frames: 3,
+            visit_memory: true,
+            visit_cell_m: 0.35,
+            commit_m: 0.5,
+            min_turn_deg: 30.0,
+            snap_turn_deg: 90.0,
+            threshold_rate_pct: 20.0,
+            odometry: OdometryConfig::default(),
         }
     }
 }
@@ -698,6 +811,12 @@ impl HvsConfig {
                 format!("= {} must be in (0.001, 2) metres", c.baseline_m),
             ));
         }
+        if !(0.0..10.0).contains(&c.height_m) {
+            return Err(self.invalid(
+                "camera.height_m",
+                format!("= {} must be in [0, 10) metres", c.height_m),
+            ));
+        }
         for (key, cfg, width) in [
             ("stereo.lo", &self.stereo.lo, 320),
             ("stereo.hi", &self.stereo.hi, 640),
@@ -800,6 +919,24 @@ impl HvsConfig {
                 ),
             ));
         }
+        if !(0.0..=50.0).contains(&f.near_percentile) {
+            return Err(self.invalid(
+                "fusion.near_percentile",
+                format!("= {} must be in 0..=50", f.near_percentile),
+            ));
+        }
+        if f.min_height_m < 0.0
+            || f.max_height_m < 0.0
+            || (f.max_height_m > 0.0 && f.max_height_m <= f.min_height_m)
+        {
+            return Err(self.invalid(
+                "fusion.max_height_m",
+                format!(
+                    "min_height_m = {} and max_height_m = {} must be >= 0 with max above min (0 disables)",
+                    f.min_height_m, f.max_height_m
+                ),
+            ));
+        }
         for (key, t) in [
             ("decision.lo", self.decision.lo),
             ("decision.hi", self.decision.hi),
@@ -807,6 +944,45 @@ impl HvsConfig {
             if !(t.side_m > 0.0 && t.front_m > 0.0) {
                 return Err(self.invalid(key, "thresholds must be positive metres"));
             }
+        }
+        let d = &self.decision;
+        for (key, value, lo, hi) in [
+            ("decision.fuzzy_band", d.fuzzy_band, 0.0, 0.5),
+            ("decision.corridor_factor", d.corridor_factor, 1.0, 4.0),
+            ("decision.smoothing", d.smoothing, 0.01, 1.0),
+            ("decision.visit_cell_m", d.visit_cell_m, 0.05, 5.0),
+            ("decision.commit_m", d.commit_m, 0.0, 10.0),
+            ("decision.min_turn_deg", d.min_turn_deg, 0.0, 90.0),
+            ("decision.snap_turn_deg", d.snap_turn_deg, 0.0, 90.0),
+            (
+                "decision.threshold_rate_pct",
+                d.threshold_rate_pct,
+                0.0,
+                100.0,
+            ),
+            (
+                "decision.odometry.forward_speed_mps",
+                d.odometry.forward_speed_mps,
+                0.001,
+                10.0,
+            ),
+            ("decision.odometry.track_m", d.odometry.track_m, 0.01, 10.0),
+            (
+                "decision.odometry.motor_tau_s",
+                d.odometry.motor_tau_s,
+                0.0,
+                10.0,
+            ),
+        ] {
+            if !(lo..=hi).contains(&value) {
+                return Err(self.invalid(key, format!("= {value} must be in {lo}..={hi}")));
+            }
+        }
+        if d.hold_frames > 100 {
+            return Err(self.invalid(
+                "decision.hold_frames",
+                format!("= {} must be at most 100", d.hold_frames),
+            ));
         }
         let a = &self.actuator;
         if a.device.is_empty() {

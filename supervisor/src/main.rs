@@ -1,7 +1,9 @@
 //! `hvs`: run the robot pipeline and the tools around it.
 
 mod bench;
+mod bench_stages;
 mod control;
+mod drive;
 mod process;
 mod report;
 mod run;
@@ -169,6 +171,32 @@ enum SimCommand {
         #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
         vertical_shift: i32,
     },
+    /// Drive the robot's algorithms (stereo, fusion, decision, actuator) in a closed loop with
+    /// the simulator, in one process and faster than real time; prints collisions, distinct
+    /// cells covered, the intersections seen and the commands sent.
+    Drive {
+        /// Map file (default: the config's sim.map).
+        #[arg(long, value_name = "FILE")]
+        map: Option<PathBuf>,
+        /// Start pose `x_m,y_m,heading_deg` (default: the map's start pose).
+        #[arg(long, value_name = "X,Y,DEG", allow_hyphen_values = true)]
+        pose: Option<String>,
+        /// Simulated seconds.
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+        /// Decisions per simulated second.
+        #[arg(long, default_value_t = 15.0)]
+        rate_hz: f64,
+        /// Visit memory on or off (default: the config's decision.visit_memory).
+        #[arg(long, value_parser = ["on", "off"])]
+        memory: Option<String>,
+        /// Config file (default: config/sim.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// Benchmarks.
@@ -193,6 +221,16 @@ enum BenchCommand {
         /// How long to run, seconds.
         #[arg(long, default_value_t = 20.0)]
         duration: f64,
+    },
+    /// Time per frame of the fusion stage (edges, fused map, windows) and the decision stage
+    /// at 320x240 and 640x480 on a rendered simulator pair.
+    Stages {
+        /// Configuration (default: config/sim.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// Timed frames per step.
+        #[arg(long, default_value_t = 200)]
+        frames: usize,
     },
     /// Time stereo matchers on the built-in simulated hallway pair: median ms per frame and
     /// million disparity evaluations per second, one thread.
@@ -424,6 +462,42 @@ fn main() -> ExitCode {
             noise,
             vertical_shift,
         ),
+        Command::Sim {
+            what:
+                SimCommand::Drive {
+                    map,
+                    pose,
+                    duration,
+                    rate_hz,
+                    memory,
+                    config,
+                    json,
+                },
+        } => (|| {
+            let config = match config {
+                Some(c) => c,
+                None => default_config()?,
+            };
+            let map = match map {
+                Some(m) => m,
+                None => {
+                    let cfg = hvs_shared::config::HvsConfig::load(&config)?;
+                    cfg.resolve_path(&cfg.sim.map)
+                }
+            };
+            let pose = pose
+                .map(|p| p.parse::<hvs_sim::Pose>())
+                .transpose()
+                .map_err(|e| anyhow::anyhow!("--pose: {e}"))?;
+            let opts = drive::DriveOptions {
+                map,
+                pose,
+                duration_s: duration,
+                rate_hz,
+                visit_memory: memory.map(|m| m == "on"),
+            };
+            drive::run(&config, &opts, json)
+        })(),
         Command::Bench { what } => match what {
             BenchCommand::Ipc { count, rate } => bench::run_ipc(count, rate),
             BenchCommand::Stereo {
@@ -434,6 +508,13 @@ fn main() -> ExitCode {
                 json,
                 base,
             } => stereo_cli::bench(&algo, &size, frames, export.as_deref(), json, &base),
+            BenchCommand::Stages { config, frames } => (|| {
+                let config = match config {
+                    Some(c) => c,
+                    None => default_config()?,
+                };
+                bench_stages::run(&config, frames)
+            })(),
             BenchCommand::Pipeline { config, duration } => (|| {
                 let config = match config {
                     Some(c) => c,

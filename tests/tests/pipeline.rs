@@ -255,7 +255,7 @@ fn bad_configs_fail_with_a_message_naming_the_fault() {
     let cases: [Case; 4] = [
         (
             "unknown key",
-            &[("min_disp = 9 ", "windw = 3\nmin_disp = 9 ")],
+            &[("min_disp = 2 ", "windw = 3\nmin_disp = 2 ")],
             "",
             &["windw", "line"],
         ),

@@ -1,8 +1,29 @@
 //! hvs decision: from ranges per window to walls, the intersection type of the reference
 //! navigation table, and a motion command, with no IPC.
+//!
+//! Policies ([`hvs_shared::config::DecisionPolicy`]):
+//! * `reference`: crisp thresholds `a` (sides) and `b` (front), the navigation table's first
+//!   option, a new command every frame, no memory (the thesis);
+//! * `fuzzy` (default): wall memberships with a fuzzy band around the thresholds and a corridor
+//!   rule ([`fuzzy_memberships`]), smoothed over frames with hysteresis; turns executed to the
+//!   reference's `acos` angle by dead reckoning and followed by a committed stretch ahead;
+//!   at a junction the least visited legal branch ([`VisitGrid`]);
+//! * `mean-estimation` and `threshold-estimation`: the two literature methods the reference
+//!   cites, on the fused windows ([`mean_estimation`], [`threshold_estimation`]).
+//!
+//! The thesis's "B intersection" survives only as a row of the navigation table ("straight");
+//! every one of the eight wall patterns already has its own row, so our reading is: B is the
+//! state in which the way ahead is open but a side is undecided (its smoothed membership is
+//! inside the fuzzy band): keep going straight until it resolves.
 
-use hvs_shared::config::WallThresholds;
-use hvs_shared::messages::{IntersectionType, MotionCommand, RangeWindow};
+pub mod odometry;
+
+use std::collections::HashMap;
+
+use hvs_shared::config::{DecisionConfig, DecisionPolicy, PulseTable, WallThresholds};
+use hvs_shared::messages::{IntersectionType, MotionCommand, RangeSource, RangeWindow};
+
+pub use odometry::{DeadReckonedPose, Odometry};
 
 /// Decision policy codes carried in [`hvs_shared::messages::Decision::policy`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -10,10 +31,28 @@ use hvs_shared::messages::{IntersectionType, MotionCommand, RangeWindow};
 pub enum Policy {
     /// The reference system: crisp wall thresholds and the navigation table's first option.
     Reference = 1,
+    /// Fuzzy walls, hysteresis, dead-reckoned turns and visit memory.
+    Fuzzy = 2,
+    /// Kostavelis et al.'s mean estimation.
+    MeanEstimation = 3,
+    /// Threshold estimation.
+    ThresholdEstimation = 4,
+}
+
+impl Policy {
+    /// The code of a configured policy.
+    pub fn of(policy: DecisionPolicy) -> Self {
+        match policy {
+            DecisionPolicy::Reference => Self::Reference,
+            DecisionPolicy::Fuzzy => Self::Fuzzy,
+            DecisionPolicy::MeanEstimation => Self::MeanEstimation,
+            DecisionPolicy::ThresholdEstimation => Self::ThresholdEstimation,
+        }
+    }
 }
 
 /// The three ranges the reference uses: left, middle and right windows (metres, `None` when
-/// the window saw no valid edge pixel).
+/// the window saw no valid edge pixel), and which path each came from.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SideRanges {
     /// Leftmost window.
@@ -22,26 +61,45 @@ pub struct SideRanges {
     pub middle_m: Option<f64>,
     /// Rightmost window.
     pub right_m: Option<f64>,
+    /// Source of (left, middle, right): the 640x480 path's ranges use its own thresholds.
+    pub sources: [RangeSource; 3],
 }
 
 impl SideRanges {
-    /// Picks windows 1, 3 and 5 of five (or 1, 2 and 3 of three) from a range report.
+    /// Ranges from the fast path only.
+    pub fn lo(left_m: Option<f64>, middle_m: Option<f64>, right_m: Option<f64>) -> Self {
+        Self {
+            left_m,
+            middle_m,
+            right_m,
+            sources: [RangeSource::Lo; 3],
+        }
+    }
+
+    /// The window indices used: 1, 3 and 5 of five (or 1, 2 and 3 of three).
+    pub fn indices(window_count: usize) -> [usize; 3] {
+        if window_count >= 5 {
+            [0, 2, 4]
+        } else {
+            [0, 1, 2]
+        }
+    }
+
+    /// Picks the reference's three windows from a range report.
     pub fn from_windows(windows: &[RangeWindow], window_count: usize) -> Self {
         let pick = |i: usize| {
             windows
                 .get(i)
                 .filter(|w| w.valid_px > 0 && w.range_m > 0.0)
-                .map(|w| w.range_m as f64)
+                .map(|w| (w.range_m as f64, RangeSource::from_code(w.source)))
         };
-        let (l, m, r) = if window_count >= 5 {
-            (0, 2, 4)
-        } else {
-            (0, 1, 2)
-        };
+        let [l, m, r] = Self::indices(window_count).map(pick);
+        let src = |p: Option<(f64, RangeSource)>| p.map_or(RangeSource::None, |p| p.1);
         Self {
-            left_m: pick(l),
-            middle_m: pick(m),
-            right_m: pick(r),
+            left_m: l.map(|p| p.0),
+            middle_m: m.map(|p| p.0),
+            right_m: r.map(|p| p.0),
+            sources: [src(l), src(m), src(r)],
         }
     }
 }
@@ -132,7 +190,20 @@ pub fn reference_decision(r: &SideRanges, t: &WallThresholds) -> Choice {
     let walls = crisp_walls(r, t);
     let intersection = classify(walls);
     let command = options(intersection)[0];
-    let (turn_angle_deg, ramp) = match command {
+    let (turn_angle_deg, ramp) = reference_turn(r, command);
+    Choice {
+        walls,
+        intersection,
+        command,
+        turn_angle_deg,
+        ramp,
+    }
+}
+
+/// The reference's turn angle and ramp for a command: `acos(r_near / r_far)` with the middle
+/// range as `r_near` and the farthest range seen as `r_far` (0 and ramp 0 for other commands).
+pub fn reference_turn(r: &SideRanges, command: MotionCommand) -> (f64, u32) {
+    match command {
         MotionCommand::Left | MotionCommand::Right => {
             let seen = [r.left_m, r.middle_m, r.right_m];
             let far = seen.iter().flatten().copied().fold(0.0, f64::max);
@@ -141,13 +212,714 @@ pub fn reference_decision(r: &SideRanges, t: &WallThresholds) -> Choice {
             (theta, turn_ramp(theta))
         }
         _ => (0.0, 0),
+    }
+}
+
+/// Membership in [0, 1] of "wall" for each side.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Memberships {
+    /// Wall on the left.
+    pub left: f64,
+    /// Wall in front.
+    pub front: f64,
+    /// Wall on the right.
+    pub right: f64,
+}
+
+/// Fuzzy "nearer than `threshold`": 1 below `threshold * (1 - band)`, 0 above
+/// `threshold * (1 + band)`, linear between (0.5 at the threshold); 0 without a range.
+pub fn near_membership(range_m: Option<f64>, threshold_m: f64, band: f64) -> f64 {
+    let Some(r) = range_m else { return 0.0 };
+    let half = (threshold_m * band).max(1e-9);
+    ((threshold_m + half - r) / (2.0 * half)).clamp(0.0, 1.0)
+}
+
+/// Wall memberships of one frame.
+///
+/// Each side is fuzzy "nearer than its threshold" (`a` for the sides, `b` in front, those
+/// of the path the range came from). On top, the corridor rule: in a hallway the side
+/// windows see the walls obliquely, so their ranges exceed `a` although the walls are right
+/// there. When the front is open, both sides are nearer than the front (a wall converging
+/// ahead; a side opening is farther than the front or not seen at all) and both are within
+/// `corridor_factor * a`, both sides count as walls. This is what reconciles the thesis's
+/// printed hallway example (2.675, 3.054, 2.910 ft: above `a` = 2.35 ft on both sides) with
+/// its other seven examples, which crisp thresholds already classify.
+pub fn fuzzy_memberships(
+    r: &SideRanges,
+    lo: &WallThresholds,
+    hi: &WallThresholds,
+    cfg: &DecisionConfig,
+) -> Memberships {
+    let t = |i: usize| {
+        if r.sources[i] == RangeSource::Hi {
+            hi
+        } else {
+            lo
+        }
     };
-    Choice {
-        walls,
-        intersection,
-        command,
-        turn_angle_deg,
-        ramp,
+    let band = cfg.fuzzy_band;
+    let left = near_membership(r.left_m, t(0).side_m, band);
+    let front = near_membership(r.middle_m, t(1).front_m, band);
+    let right = near_membership(r.right_m, t(2).side_m, band);
+    let corridor = match (r.left_m, r.right_m) {
+        (Some(l), Some(rr)) => {
+            // Nearer than the front by at least 3 % of it (an unseen front is far).
+            let nearer = |x: f64| match r.middle_m {
+                None => 1.0,
+                Some(f) => ((f - x) / (0.03 * f).max(1e-9)).clamp(0.0, 1.0),
+            };
+            let within = |x: f64, i: usize| {
+                near_membership(Some(x), t(i).side_m * cfg.corridor_factor, band)
+            };
+            (1.0 - front)
+                .min(nearer(l))
+                .min(nearer(rr))
+                .min(within(l, 0))
+                .min(within(rr, 2))
+        }
+        _ => 0.0,
+    };
+    Memberships {
+        left: left.max(corridor),
+        front,
+        right: right.max(corridor),
+    }
+}
+
+/// A coarse grid of how often the (dead-reckoned) robot entered each cell.
+#[derive(Debug, Clone, Default)]
+pub struct VisitGrid {
+    cell_m: f64,
+    visits: HashMap<(i64, i64), u32>,
+    current: Option<(i64, i64)>,
+}
+
+impl VisitGrid {
+    /// An empty grid of `cell_m` cells.
+    pub fn new(cell_m: f64) -> Self {
+        Self {
+            cell_m,
+            visits: HashMap::new(),
+            current: None,
+        }
+    }
+
+    fn cell(&self, x_m: f64, y_m: f64) -> (i64, i64) {
+        (
+            (x_m / self.cell_m).floor() as i64,
+            (y_m / self.cell_m).floor() as i64,
+        )
+    }
+
+    /// Records the robot at a position (a visit counts when it enters a cell).
+    pub fn record(&mut self, x_m: f64, y_m: f64) {
+        let c = self.cell(x_m, y_m);
+        if self.current != Some(c) {
+            *self.visits.entry(c).or_insert(0) += 1;
+            self.current = Some(c);
+        }
+    }
+
+    /// Visits of the cell containing a position.
+    pub fn visits_at(&self, x_m: f64, y_m: f64) -> u32 {
+        self.visits.get(&self.cell(x_m, y_m)).copied().unwrap_or(0)
+    }
+
+    /// How visited the way along `heading_rad` from a position looks: the visits of the cells
+    /// 1, 2 and 3 cells away, nearest weighted most.
+    pub fn score(&self, x_m: f64, y_m: f64, heading_rad: f64) -> u32 {
+        (1..=3)
+            .map(|k| {
+                let d = k as f64 * self.cell_m;
+                let v = self.visits_at(x_m + d * heading_rad.cos(), y_m + d * heading_rad.sin());
+                v * (4 - k as u32)
+            })
+            .sum()
+    }
+
+    /// Distinct cells entered.
+    pub fn distinct_cells(&self) -> usize {
+        self.visits.len()
+    }
+}
+
+/// Heading change of a command's branch, radians (left = +90 degrees).
+fn branch_heading(command: MotionCommand) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    match command {
+        MotionCommand::Left => FRAC_PI_2,
+        MotionCommand::Right => -FRAC_PI_2,
+        MotionCommand::Reverse => PI,
+        MotionCommand::Forward | MotionCommand::Stop => 0.0,
+    }
+}
+
+/// Mean estimation (Kostavelis et al.): the disparity sum of each window (valid pixels times
+/// their mean disparity `f b / mean range`, so `focal_b` = f * b of the path) says how much is
+/// near; the window with the smallest sum is the freest direction.
+pub fn mean_estimation(windows: [Option<&RangeWindow>; 3]) -> MotionCommand {
+    let sum = |w: Option<&RangeWindow>| {
+        w.filter(|w| w.valid_px > 0 && w.mean_m > 0.0)
+            .map_or(0.0, |w| {
+                w.valid_px as f64 / w.mean_m as f64
+                    * if w.source == RangeSource::Hi as u32 {
+                        2.0
+                    } else {
+                        1.0
+                    }
+            })
+    };
+    let [l, m, r] = windows.map(sum);
+    if m <= l && m <= r {
+        MotionCommand::Forward
+    } else if l < r {
+        MotionCommand::Left
+    } else {
+        MotionCommand::Right
+    }
+}
+
+/// Threshold estimation: the middle window is blocked when at least `rate_pct` % of its
+/// pixels are nearer than `near_limit_m` (the literature's "disparity above T"; with the
+/// fusion stage's `near_percentile` equal to `rate_pct`, `near_m` below the limit is exactly
+/// that test). Free: forward; blocked: toward the side with the larger mean range.
+pub fn threshold_estimation(
+    windows: [Option<&RangeWindow>; 3],
+    near_limit_m: f64,
+) -> MotionCommand {
+    let valid = windows.map(|w| w.filter(|w| w.valid_px > 0));
+    let blocked = valid[1].is_some_and(|w| (w.near_m as f64) < near_limit_m);
+    if !blocked {
+        return MotionCommand::Forward;
+    }
+    let mean = |w: Option<&RangeWindow>| w.map_or(f64::INFINITY, |w| w.mean_m as f64);
+    let windows = valid;
+    if mean(windows[0]) >= mean(windows[2]) {
+        MotionCommand::Left
+    } else {
+        MotionCommand::Right
+    }
+}
+
+/// What the navigator is doing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Maneuver {
+    /// Deciding frame by frame.
+    Cruise,
+    /// Turning in place until the dead-reckoned heading has changed by `target_rad`.
+    Turning {
+        command: MotionCommand,
+        start_heading: f64,
+        target_rad: f64,
+        ramp: u32,
+    },
+    /// Driving ahead after a turn until `until_m` of odometry (no new branch before).
+    Commit { until_m: f64 },
+    /// Backing up until `until_m` of odometry: the view froze while the wheels turned
+    /// (wedged against a wall).
+    Backup { until_m: f64 },
+}
+
+/// One decision of the [`Navigator`], with what it was based on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavDecision {
+    /// Smoothed wall memberships.
+    pub memberships: Memberships,
+    /// The intersection type.
+    pub intersection: IntersectionType,
+    /// The command.
+    pub command: MotionCommand,
+    /// Turn angle for turns, degrees.
+    pub turn_angle_deg: f64,
+    /// PSC ramp for the command.
+    pub ramp: u32,
+    /// The dead-reckoned pose.
+    pub pose: DeadReckonedPose,
+}
+
+/// On the approach to a front wall (1.9 b to 3.1 b away), a side window whose nearest points
+/// (its `near_m`) are closer than this share of the front's range sees a side wall running
+/// on to the front wall; an open side shows nothing nearer than the junction's corner and
+/// the far wall (measured in the simulator's junction maps: 0.49..0.80 with a wall,
+/// 0.76..0.88 open, from 1.6 to 2.6 m).
+const APPROACH_RATIO: f64 = 0.75;
+/// Frames of an unchanged view while moving that mean the robot is wedged (about 1 s at
+/// 15 Hz).
+const STUCK_FRAMES: u32 = 15;
+/// How far to back up when wedged, metres.
+const BACKUP_M: f64 = 0.25;
+/// A side window whose nearest points are nearer than this (a wall about 0.3 m to the side)
+/// steers the robot away from that wall.
+const CLEARANCE_NEAR_M: f64 = 0.6;
+/// Membership above which a wall appears (and below `1 - ON` it disappears).
+const WALL_ON: f64 = 0.6;
+/// Sent while turning: stop this many seconds of turn early (the command takes about this
+/// long to reach the wheels: one decision period plus two PSC commands on a 2400 baud wire).
+const TURN_LEAD_S: f64 = 0.1;
+
+/// The stateful decision maker of the decision stage.
+#[derive(Debug, Clone)]
+pub struct Navigator {
+    cfg: DecisionConfig,
+    smoothed: Option<Memberships>,
+    walls: Walls,
+    current: MotionCommand,
+    pending: Option<(MotionCommand, u32)>,
+    maneuver: Maneuver,
+    odometry: Odometry,
+    grid: VisitGrid,
+    /// Side memberships seen on the approach to the front wall.
+    approach: Option<Memberships>,
+    /// The front was nearer than 2 b on the last frame that saw it.
+    front_was_near: bool,
+    /// Turns tried at the current junction after the first one met a wall.
+    attempts: u32,
+    /// The last frame's three ranges and how many frames in a row they stayed the same
+    /// while the robot was commanded to move.
+    last_view: [Option<f64>; 3],
+    frozen_frames: u32,
+    /// Frames in a row with no range in any window.
+    blind_frames: u32,
+}
+
+impl Navigator {
+    /// A navigator for a decision config and the robot's pulse table.
+    pub fn new(cfg: &DecisionConfig, pulses: &PulseTable) -> Self {
+        Self {
+            cfg: cfg.clone(),
+            smoothed: None,
+            walls: Walls {
+                left: false,
+                front: false,
+                right: false,
+            },
+            current: MotionCommand::Stop,
+            pending: None,
+            maneuver: Maneuver::Cruise,
+            odometry: Odometry::new(cfg.odometry, pulses),
+            grid: VisitGrid::new(cfg.visit_cell_m),
+            approach: None,
+            front_was_near: false,
+            attempts: 0,
+            last_view: [None; 3],
+            frozen_frames: 0,
+            blind_frames: 0,
+        }
+    }
+
+    /// The actuator put a command on the wire (feeds dead reckoning).
+    pub fn on_sent(&mut self, sent_ns: u64, left_pw: u16, right_pw: u16, ramp: u8) {
+        self.odometry.on_sent(sent_ns, left_pw, right_pw, ramp);
+    }
+
+    /// The visit grid.
+    pub fn visits(&self) -> &VisitGrid {
+        &self.grid
+    }
+
+    /// The dead-reckoned pose now.
+    pub fn pose(&self) -> DeadReckonedPose {
+        self.odometry.pose()
+    }
+
+    /// Decides from one range report's windows at `now_ns`.
+    pub fn decide(
+        &mut self,
+        windows: &[RangeWindow],
+        window_count: usize,
+        now_ns: u64,
+    ) -> NavDecision {
+        self.odometry.advance_to(now_ns);
+        let pose = self.odometry.pose();
+        self.grid.record(pose.x_m, pose.y_m);
+        let sides = SideRanges::from_windows(windows, window_count);
+        let idx = SideRanges::indices(window_count);
+        let picked = idx.map(|i| windows.get(i));
+        let cfg = self.cfg.clone();
+        let raw = fuzzy_memberships(&sides, &cfg.lo, &cfg.hi, &cfg);
+        match cfg.policy {
+            DecisionPolicy::Reference => {
+                let c = reference_decision(&sides, &cfg.lo);
+                self.current = c.command;
+                NavDecision {
+                    memberships: Memberships {
+                        left: f64::from(u8::from(c.walls.left)),
+                        front: f64::from(u8::from(c.walls.front)),
+                        right: f64::from(u8::from(c.walls.right)),
+                    },
+                    intersection: c.intersection,
+                    command: c.command,
+                    turn_angle_deg: c.turn_angle_deg,
+                    ramp: c.ramp,
+                    pose,
+                }
+            }
+            DecisionPolicy::MeanEstimation | DecisionPolicy::ThresholdEstimation => {
+                let proposal = if cfg.policy == DecisionPolicy::MeanEstimation {
+                    mean_estimation(picked)
+                } else {
+                    threshold_estimation(picked, cfg.lo.front_m)
+                };
+                let walls = crisp_walls(&sides, &cfg.lo);
+                let command = self.hold(proposal, false);
+                let (turn_angle_deg, ramp) = reference_turn(&sides, command);
+                NavDecision {
+                    memberships: raw,
+                    intersection: classify(walls),
+                    command,
+                    turn_angle_deg,
+                    ramp,
+                    pose,
+                }
+            }
+            DecisionPolicy::Fuzzy => {
+                let near = picked.map(|w| {
+                    w.filter(|w| w.valid_px > 0 && w.near_m > 0.0)
+                        .map(|w| w.near_m as f64)
+                });
+                self.fuzzy(&sides, near, raw, pose)
+            }
+        }
+    }
+
+    /// The command filter: a new command must be proposed `hold_frames` times in a row
+    /// (`urgent` ones act at once).
+    fn hold(&mut self, proposal: MotionCommand, urgent: bool) -> MotionCommand {
+        if proposal == self.current || urgent || self.cfg.hold_frames <= 1 {
+            self.current = proposal;
+            self.pending = None;
+            return proposal;
+        }
+        let count = match self.pending {
+            Some((c, n)) if c == proposal => n + 1,
+            _ => 1,
+        };
+        if count >= self.cfg.hold_frames {
+            self.current = proposal;
+            self.pending = None;
+        } else {
+            self.pending = Some((proposal, count));
+        }
+        self.current
+    }
+
+    fn fuzzy(
+        &mut self,
+        sides: &SideRanges,
+        near: [Option<f64>; 3],
+        raw: Memberships,
+        pose: DeadReckonedPose,
+    ) -> NavDecision {
+        let a = self.cfg.smoothing;
+        let m = match self.smoothed {
+            None => raw,
+            Some(s) => Memberships {
+                left: s.left + a * (raw.left - s.left),
+                front: s.front + a * (raw.front - s.front),
+                right: s.right + a * (raw.right - s.right),
+            },
+        };
+        self.smoothed = Some(m);
+        let flip = |on: bool, v: f64| if on { v > 1.0 - WALL_ON } else { v >= WALL_ON };
+        self.walls = Walls {
+            left: flip(self.walls.left, m.left),
+            front: flip(self.walls.front, m.front),
+            right: flip(self.walls.right, m.right),
+        };
+        let b = self.threshold(sides, 1).front_m;
+        // The front: a wall, or no data right after a near wall (closer than the matcher's
+        // shortest range).
+        if let Some(r) = sides.middle_m {
+            self.front_was_near = r < 2.0 * b;
+        }
+        let front_blocked = self.walls.front || (sides.middle_m.is_none() && self.front_was_near);
+        // What the sides looked like on the approach (front between 1.4 b and 3.5 b): when the
+        // front wall is reached, the side windows see nothing but that wall.
+        // A side wall there converges on the front wall (its window's range is clearly shorter
+        // than the front's); an open side shows the far wall at about the front's range.
+        if let Some(front) = sides.middle_m.filter(|&r| r >= 1.9 * b && r <= 3.1 * b) {
+            let band = self.cfg.fuzzy_band;
+            let view = Memberships {
+                left: near_membership(near[0], APPROACH_RATIO * front, band),
+                front: 1.0,
+                right: near_membership(near[2], APPROACH_RATIO * front, band),
+            };
+            self.approach = Some(match self.approach {
+                None => view,
+                Some(p) => Memberships {
+                    left: p.left + a * (view.left - p.left),
+                    front: 1.0,
+                    right: p.right + a * (view.right - p.right),
+                },
+            });
+        }
+        let undecided = |v: f64| v > 1.0 - WALL_ON && v < WALL_ON;
+        let no_data = sides.left_m.is_none() && sides.middle_m.is_none() && sides.right_m.is_none();
+        let mut intersection = if no_data && !front_blocked {
+            IntersectionType::Unknown
+        } else if front_blocked {
+            let view = self.approach.unwrap_or(m);
+            classify(Walls {
+                left: view.left >= 0.5,
+                front: true,
+                right: view.right >= 0.5,
+            })
+        } else {
+            classify(self.walls)
+        };
+        if !front_blocked && !undecided(m.front) && (undecided(m.left) || undecided(m.right)) {
+            intersection = IntersectionType::BIntersection;
+        }
+        let decision = |command: MotionCommand, angle: f64, ramp: u32, intersection| NavDecision {
+            memberships: m,
+            intersection,
+            command,
+            turn_angle_deg: angle,
+            ramp,
+            pose,
+        };
+        // Wedged: dead reckoning integrates the commands, but if the picture does not change
+        // for a second while the wheels are told to move, the robot is stuck against a wall.
+        let view = [sides.left_m, sides.middle_m, sides.right_m];
+        let same = view.iter().zip(&self.last_view).all(|(a, b)| match (a, b) {
+            (Some(a), Some(b)) => (a - b).abs() <= 0.02 * b.max(0.1),
+            (None, None) => true,
+            _ => false,
+        });
+        self.last_view = view;
+        let moving = !matches!(self.current, MotionCommand::Stop)
+            && !matches!(self.maneuver, Maneuver::Backup { .. });
+        self.frozen_frames = if same && moving {
+            self.frozen_frames + 1
+        } else {
+            0
+        };
+        if self.frozen_frames >= STUCK_FRAMES {
+            self.frozen_frames = 0;
+            self.attempts = 0;
+            self.maneuver = Maneuver::Backup {
+                until_m: self.odometry.distance_m() + BACKUP_M,
+            };
+        }
+        // A maneuver in progress.
+        match self.maneuver {
+            Maneuver::Backup { until_m } => {
+                if self.odometry.distance_m() < until_m {
+                    self.current = MotionCommand::Reverse;
+                    return decision(MotionCommand::Reverse, 0.0, 0, intersection);
+                }
+                self.maneuver = Maneuver::Cruise;
+                self.current = MotionCommand::Stop;
+            }
+            Maneuver::Turning {
+                command,
+                start_heading,
+                target_rad,
+                ramp,
+            } => {
+                let turned = (pose.heading_rad - start_heading).abs();
+                let lead = self.odometry.turn_rate_rad_s().abs() * TURN_LEAD_S;
+                if turned + lead < target_rad {
+                    self.current = command;
+                    return decision(command, target_rad.to_degrees(), ramp, intersection);
+                }
+                self.approach = None;
+                self.front_was_near = false;
+                self.maneuver = Maneuver::Commit {
+                    until_m: self.odometry.distance_m() + self.cfg.commit_m,
+                };
+                if !front_blocked {
+                    self.current = MotionCommand::Forward;
+                    self.pending = None;
+                    return decision(MotionCommand::Forward, 0.0, 0, intersection);
+                }
+                // Still blocked: the branch guessed from afar was not there. Try the other
+                // side (half a turn back past the start), then, if that is a wall too, the
+                // way back (a dead end).
+                self.attempts += 1;
+                let (next, target) = if self.attempts == 1 {
+                    let other = if command == MotionCommand::Left {
+                        MotionCommand::Right
+                    } else {
+                        MotionCommand::Left
+                    };
+                    (other, std::f64::consts::PI)
+                } else {
+                    (command, self.turn_target(pose, command, 90.0))
+                };
+                self.maneuver = Maneuver::Turning {
+                    command: next,
+                    start_heading: pose.heading_rad,
+                    target_rad: target,
+                    ramp: 0,
+                };
+                self.current = next;
+                return decision(next, target.to_degrees(), 0, intersection);
+            }
+            Maneuver::Commit { until_m } => {
+                if self.odometry.distance_m() < until_m && !front_blocked {
+                    if let Some(turn) = self.axis_correction(pose, [None; 3]) {
+                        return decision(turn.0, turn.1.to_degrees(), 0, intersection);
+                    }
+                    self.current = MotionCommand::Forward;
+                    return decision(MotionCommand::Forward, 0.0, 0, intersection);
+                }
+                self.maneuver = Maneuver::Cruise;
+            }
+            Maneuver::Cruise => {}
+        }
+        if !front_blocked {
+            // Open ahead: straight on, a legal option of every open-front row of the table
+            // (hallway, both T's with a side wall, X, B). A forward camera with a 45-55 degree
+            // field of view sees a side opening 1-3 m before reaching it and cannot place it
+            // well enough to turn into it; side branches are taken where a front wall forces
+            // the choice. Keep the heading on the hallway axis (dead reckoning).
+            let proposal = if intersection == IntersectionType::Unknown {
+                // Nothing seen: stop, and after a second look elsewhere.
+                self.blind_frames += 1;
+                if self.blind_frames >= STUCK_FRAMES {
+                    self.blind_frames = 0;
+                    let target = self.turn_target(pose, MotionCommand::Left, 90.0);
+                    self.maneuver = Maneuver::Turning {
+                        command: MotionCommand::Left,
+                        start_heading: pose.heading_rad,
+                        target_rad: target,
+                        ramp: 0,
+                    };
+                    self.current = MotionCommand::Left;
+                    return decision(MotionCommand::Left, target.to_degrees(), 0, intersection);
+                }
+                MotionCommand::Stop
+            } else {
+                self.blind_frames = 0;
+                MotionCommand::Forward
+            };
+            if let Some(turn) = self.axis_correction(pose, near) {
+                return decision(turn.0, turn.1.to_degrees(), 0, intersection);
+            }
+            let command = self.hold(proposal, false);
+            return decision(command, 0.0, 0, intersection);
+        }
+        // The front is blocked: the table's options for what the approach showed, the visit
+        // memory choosing among the branches.
+        let table = options(intersection);
+        let moving: Vec<MotionCommand> = table
+            .iter()
+            .copied()
+            .filter(|c| matches!(c, MotionCommand::Left | MotionCommand::Right))
+            .collect();
+        let command = match (moving.first(), self.cfg.visit_memory && moving.len() > 1) {
+            (None, _) => MotionCommand::Reverse,
+            (Some(&first), false) => first,
+            (Some(&first), true) => moving
+                .iter()
+                .copied()
+                .min_by_key(|&c| {
+                    self.grid
+                        .score(pose.x_m, pose.y_m, pose.heading_rad + branch_heading(c))
+                })
+                .unwrap_or(first),
+        };
+        let (angle, ramp) = reference_turn(sides, command);
+        let (turn, turn_rad) = match command {
+            // Dead end: turn around in place rather than back up blind.
+            MotionCommand::Reverse => (MotionCommand::Right, std::f64::consts::PI),
+            c => (c, self.turn_target(pose, c, angle)),
+        };
+        self.current = turn;
+        self.pending = None;
+        self.attempts = 0;
+        // Turns run with ramp 0: the reference's ramp set the turn's duration (and so its
+        // angle) open loop; here dead reckoning ends the turn, and a ramp would only let the
+        // robot roll on into the junction while the pulses slew.
+        let _ = ramp;
+        self.maneuver = Maneuver::Turning {
+            command: turn,
+            start_heading: pose.heading_rad,
+            target_rad: turn_rad,
+            ramp: 0,
+        };
+        decision(turn, turn_rad.to_degrees(), 0, intersection)
+    }
+
+    /// Thresholds of the path side `i` (0 left, 1 middle, 2 right) came from.
+    fn threshold(&self, sides: &SideRanges, i: usize) -> WallThresholds {
+        if sides.sources[i] == RangeSource::Hi {
+            self.cfg.hi
+        } else {
+            self.cfg.lo
+        }
+    }
+
+    /// How far to turn, radians: with `snap_turn_deg` > 0 to the next multiple of it (indoor
+    /// hallways meet at right angles, and dead reckoning keeps the heading on the axis);
+    /// otherwise the reference angle, at least `min_turn_deg`.
+    fn turn_target(
+        &self,
+        pose: DeadReckonedPose,
+        command: MotionCommand,
+        reference_deg: f64,
+    ) -> f64 {
+        let snap = self.cfg.snap_turn_deg.to_radians();
+        if snap > 0.0 {
+            let sign = if command == MotionCommand::Left {
+                1.0
+            } else {
+                -1.0
+            };
+            let goal = ((pose.heading_rad + sign * snap) / snap).round() * snap;
+            (goal - pose.heading_rad).abs().max(0.5 * snap)
+        } else {
+            reference_deg
+                .max(self.cfg.min_turn_deg)
+                .min(90.0)
+                .to_radians()
+        }
+    }
+
+    /// A short turn onto the wanted heading when the dead-reckoned heading is more than 6
+    /// degrees off it: the nearest hallway axis (a multiple of `snap_turn_deg`), bent by 12
+    /// degrees away from a side wall that is too close. Without the bend a robot that left a
+    /// turn off-centre scrapes along the wall, and its next turn in place sweeps a corner into
+    /// it.
+    fn axis_correction(
+        &mut self,
+        pose: DeadReckonedPose,
+        near: [Option<f64>; 3],
+    ) -> Option<(MotionCommand, f64)> {
+        let snap = self.cfg.snap_turn_deg.to_radians();
+        if snap <= 0.0 {
+            return None;
+        }
+        let axis = (pose.heading_rad / snap).round() * snap;
+        // Keep clear of a side wall closer than about 0.3 m (a side window's nearest points lie
+        // about twice the wall's lateral distance ahead: its outer edge is 26.5 degrees off
+        // the axis at f = 320 px). Balancing the two sides was tried and made the robot dither:
+        // the side windows' nearest edge points are too sparse for a fine lateral estimate.
+        let max_bend = 12f64.to_radians();
+        let close = |v: Option<f64>| v.is_some_and(|v| v < CLEARANCE_NEAR_M);
+        let bend = match (close(near[0]), close(near[2])) {
+            (false, true) => max_bend,
+            (true, false) => -max_bend,
+            _ => 0.0,
+        };
+        let error = pose.heading_rad - (axis + bend);
+        if error.abs() < 6f64.to_radians() {
+            return None;
+        }
+        let command = if error > 0.0 {
+            MotionCommand::Right
+        } else {
+            MotionCommand::Left
+        };
+        self.current = command;
+        self.maneuver = Maneuver::Turning {
+            command,
+            start_heading: pose.heading_rad,
+            target_rad: error.abs(),
+            ramp: 0,
+        };
+        Some((command, error.abs()))
     }
 }
 
@@ -164,11 +936,7 @@ mod tests {
     }
 
     fn feet(l: f64, m: f64, r: f64) -> SideRanges {
-        SideRanges {
-            left_m: Some(l * M_PER_FT),
-            middle_m: Some(m * M_PER_FT),
-            right_m: Some(r * M_PER_FT),
-        }
+        SideRanges::lo(Some(l * M_PER_FT), Some(m * M_PER_FT), Some(r * M_PER_FT))
     }
 
     #[test]
@@ -251,11 +1019,7 @@ mod tests {
 
     #[test]
     fn empty_windows_count_as_open() {
-        let r = SideRanges {
-            left_m: None,
-            middle_m: None,
-            right_m: Some(0.3),
-        };
+        let r = SideRanges::lo(None, None, Some(0.3));
         assert_eq!(
             reference_decision(&r, &reference_thresholds()).intersection,
             IntersectionType::TWallRight
@@ -291,6 +1055,285 @@ mod tests {
         assert_eq!(
             (s.left_m, s.middle_m, s.right_m),
             (Some(1.0), Some(2.0), Some(3.0))
+        );
+    }
+
+    /// The thesis's printed examples (feet) and the type each figure shows.
+    const EXAMPLES: [((f64, f64, f64), IntersectionType, MotionCommand); 8] = [
+        (
+            (2.675, 3.054, 2.910),
+            IntersectionType::StraightHallway,
+            MotionCommand::Forward,
+        ),
+        (
+            (1.490, 1.928, 2.586),
+            IntersectionType::RightTurn,
+            MotionCommand::Right,
+        ),
+        (
+            (2.569, 2.258, 1.760),
+            IntersectionType::LeftTurn,
+            MotionCommand::Left,
+        ),
+        (
+            (2.828, 2.206, 2.458),
+            IntersectionType::TBottom,
+            MotionCommand::Left,
+        ),
+        (
+            (3.154, 2.974, 1.890),
+            IntersectionType::TWallRight,
+            MotionCommand::Left,
+        ),
+        (
+            (2.320, 2.813, 2.855),
+            IntersectionType::TWallLeft,
+            MotionCommand::Right,
+        ),
+        (
+            (2.720, 2.632, 2.447),
+            IntersectionType::XIntersection,
+            MotionCommand::Right,
+        ),
+        (
+            (1.765, 1.843, 1.961),
+            IntersectionType::DeadEnd,
+            MotionCommand::Reverse,
+        ),
+    ];
+
+    fn fuzzy_type(l: f64, m: f64, r: f64) -> IntersectionType {
+        let cfg = DecisionConfig::default();
+        let mem = fuzzy_memberships(&feet(l, m, r), &cfg.lo, &cfg.hi, &cfg);
+        classify(Walls {
+            left: mem.left >= 0.5,
+            front: mem.front >= 0.5,
+            right: mem.right >= 0.5,
+        })
+    }
+
+    #[test]
+    fn fuzzy_walls_classify_every_printed_example_and_the_table_gives_its_command() {
+        for ((l, m, r), ty, cmd) in EXAMPLES {
+            assert_eq!(fuzzy_type(l, m, r), ty, "{l},{m},{r} ft");
+            assert_eq!(options(ty)[0], cmd, "{ty:?}");
+        }
+        // Crisp thresholds get the hallway wrong: it is why the fuzzy corridor rule exists.
+        let (l, m, r) = EXAMPLES[0].0;
+        assert_eq!(
+            reference_decision(&feet(l, m, r), &reference_thresholds()).intersection,
+            IntersectionType::XIntersection
+        );
+    }
+
+    #[test]
+    fn fuzzy_decisions_are_stable_across_small_range_changes() {
+        // Every example keeps its type when each range moves by up to 0.02 ft (6 mm).
+        for ((l, m, r), ty, _) in EXAMPLES {
+            for dl in [-0.02, 0.0, 0.02] {
+                for dm in [-0.02, 0.0, 0.02] {
+                    for dr in [-0.02, 0.0, 0.02] {
+                        assert_eq!(
+                            fuzzy_type(l + dl, m + dm, r + dr),
+                            ty,
+                            "{l}+{dl},{m}+{dm},{r}+{dr}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn memberships_are_half_at_the_threshold_and_graded_around_it() {
+        assert!((near_membership(Some(1.0), 1.0, 0.1) - 0.5).abs() < 1e-9);
+        assert_eq!(near_membership(Some(0.85), 1.0, 0.1), 1.0);
+        assert_eq!(near_membership(Some(1.15), 1.0, 0.1), 0.0);
+        assert!((near_membership(Some(1.05), 1.0, 0.1) - 0.25).abs() < 1e-9);
+        assert_eq!(near_membership(None, 1.0, 0.1), 0.0);
+    }
+
+    fn window(range_m: f64, valid_px: u32) -> RangeWindow {
+        RangeWindow {
+            range_m: range_m as f32,
+            near_m: range_m as f32,
+            mean_m: range_m as f32,
+            valid_px,
+            confidence: 0.8,
+            source: RangeSource::Lo as u32,
+        }
+    }
+
+    fn navigator(policy: DecisionPolicy) -> Navigator {
+        let cfg = DecisionConfig {
+            policy,
+            ..DecisionConfig::default()
+        };
+        Navigator::new(&cfg, &PulseTable::default())
+    }
+
+    #[test]
+    fn hysteresis_keeps_one_noisy_frame_from_flipping_the_command() {
+        let mut nav = navigator(DecisionPolicy::Fuzzy);
+        let ft = M_PER_FT;
+        let hallway = [
+            window(2.675 * ft, 200),
+            window(3.054 * ft, 200),
+            window(2.910 * ft, 200),
+        ];
+        // One frame that alone reads as a T-bottom (front near).
+        let glitch = [
+            window(2.828 * ft, 200),
+            window(2.206 * ft, 200),
+            window(2.458 * ft, 200),
+        ];
+        let mut t = 0u64;
+        let mut step = |w: &[RangeWindow; 3], nav: &mut Navigator| {
+            t += 33_000_000;
+            nav.decide(w, 3, t)
+        };
+        // From standstill, Forward comes after `hold_frames` frames.
+        let first: Vec<MotionCommand> = (0..3).map(|_| step(&hallway, &mut nav).command).collect();
+        assert_eq!(
+            first,
+            [
+                MotionCommand::Stop,
+                MotionCommand::Stop,
+                MotionCommand::Forward
+            ]
+        );
+        for _ in 0..10 {
+            assert_eq!(step(&hallway, &mut nav).command, MotionCommand::Forward);
+        }
+        let d = step(&glitch, &mut nav);
+        assert_eq!(d.command, MotionCommand::Forward, "{d:?}");
+        assert_eq!(d.intersection, IntersectionType::StraightHallway);
+        assert_eq!(step(&hallway, &mut nav).command, MotionCommand::Forward);
+        // A real change (the front wall stays) does come through.
+        let mut turned = false;
+        for _ in 0..6 {
+            turned |= step(&glitch, &mut nav).command == MotionCommand::Left;
+        }
+        assert!(turned);
+    }
+
+    #[test]
+    fn the_reference_policy_reacts_to_every_frame() {
+        let mut nav = navigator(DecisionPolicy::Reference);
+        let ft = M_PER_FT;
+        let glitch = [
+            window(2.828 * ft, 200),
+            window(2.206 * ft, 200),
+            window(2.458 * ft, 200),
+        ];
+        let d = nav.decide(&glitch, 3, 1);
+        assert_eq!(
+            (d.intersection, d.command),
+            (IntersectionType::TBottom, MotionCommand::Left)
+        );
+    }
+
+    #[test]
+    fn a_turn_is_executed_to_its_angle_by_dead_reckoning_then_committed() {
+        let p = PulseTable::default();
+        let ft = M_PER_FT;
+        // A left turn (walls front and right), then, once the robot turns, a hallway.
+        let left_turn = [
+            window(2.569 * ft, 200),
+            window(2.258 * ft, 200),
+            window(1.760 * ft, 200),
+        ];
+        let hallway = [
+            window(2.675 * ft, 200),
+            window(3.054 * ft, 200),
+            window(2.910 * ft, 200),
+        ];
+        // Snapped to the hallway axes (the default), and by the reference's acos angle.
+        let reference_deg = turn_angle_deg(2.258, 2.569).max(30.0);
+        for (snap, expected) in [(90.0, 90.0), (0.0, reference_deg)] {
+            let cfg = DecisionConfig {
+                snap_turn_deg: snap,
+                ..DecisionConfig::default()
+            };
+            let mut nav = Navigator::new(&cfg, &p);
+            let mut t = 0u64;
+            let mut commands = Vec::new();
+            let mut ramps = Vec::new();
+            for i in 0..200 {
+                t += 33_000_000;
+                let d = nav.decide(if i == 0 { &left_turn } else { &hallway }, 3, t);
+                ramps.push(d.ramp);
+                // The actuator sends every command at once.
+                let pulses = match d.command {
+                    MotionCommand::Left => p.left,
+                    MotionCommand::Right => p.right,
+                    MotionCommand::Forward => p.forward,
+                    MotionCommand::Reverse => p.reverse,
+                    MotionCommand::Stop => p.neutral,
+                };
+                nav.on_sent(t, pulses.left, pulses.right, d.ramp as u8);
+                commands.push(d.command);
+                if d.command == MotionCommand::Forward {
+                    break;
+                }
+            }
+            assert_eq!(commands[0], MotionCommand::Left);
+            assert_eq!(
+                commands.last(),
+                Some(&MotionCommand::Forward),
+                "{commands:?}"
+            );
+            assert!(commands.len() > 2, "{commands:?}");
+            // Dead reckoning ends the turn: no ramp.
+            assert!(ramps.iter().all(|&r| r == 0), "{ramps:?}");
+            // Within the turn-rate lead (here the wheels obey at once, so the lead that covers
+            // the real link's latency stops the turn up to ~17 degrees early).
+            let turned = nav.pose().heading_rad.to_degrees();
+            assert!(
+                (turned - expected).abs() < 20.0,
+                "snap {snap}: turned {turned} expected {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn visit_memory_prefers_the_branch_not_taken() {
+        let mut grid = VisitGrid::new(0.35);
+        // Visited: the cells to the right (negative y) of the origin.
+        for k in 1..=3 {
+            grid.record(0.0, -0.35 * k as f64 - 0.1);
+            grid.record(0.0, 0.0);
+        }
+        let right = grid.score(0.0, 0.0, -std::f64::consts::FRAC_PI_2);
+        let left = grid.score(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        assert!(right > 0 && left == 0, "left {left} right {right}");
+        assert_eq!(grid.visits_at(0.0, 0.0), 3);
+    }
+
+    #[test]
+    fn literature_methods_pick_the_freest_window() {
+        let near = window(0.5, 400);
+        let far = window(2.0, 100);
+        let farther = window(3.0, 100);
+        assert_eq!(
+            mean_estimation([Some(&farther), Some(&near), Some(&far)]),
+            MotionCommand::Left
+        );
+        assert_eq!(
+            mean_estimation([Some(&near), Some(&far), Some(&near)]),
+            MotionCommand::Forward
+        );
+        assert_eq!(
+            mean_estimation([Some(&near), Some(&near), Some(&far)]),
+            MotionCommand::Right
+        );
+        assert_eq!(
+            threshold_estimation([Some(&near), Some(&far), Some(&near)], 0.73),
+            MotionCommand::Forward
+        );
+        assert_eq!(
+            threshold_estimation([Some(&near), Some(&near), Some(&far)], 0.73),
+            MotionCommand::Right
         );
     }
 }

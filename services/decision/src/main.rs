@@ -2,7 +2,7 @@
 
 use std::process::ExitCode;
 
-use hvs_decision::{Policy, SideRanges, reference_decision};
+use hvs_decision::{Navigator, Policy};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::messages::Decision;
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
@@ -14,13 +14,21 @@ fn main() -> ExitCode {
 
 fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let ranges = rt.node.subscriber(&topics::RANGES, 2)?;
+    // What the actuator really sent: dead reckoning for the turns and the visit memory.
+    let sent = rt.node.subscriber(&topics::ACTUATOR_SENT, 16)?;
     let mut decisions = rt.node.publisher(&topics::DECISIONS)?;
-    let thresholds = rt.config.decision.lo;
+    let cfg = rt.config.decision.clone();
+    let mut nav = Navigator::new(&cfg, &rt.config.actuator.pulses);
+    let policy = Policy::of(cfg.policy);
     tracing::info!(
-        "{}: reference policy, side wall < {:.3} m, front wall < {:.3} m",
+        "{}: {:?} policy, side wall < {:.3} m, front wall < {:.3} m (640x480: {:.3} / {:.3} m), visit memory {}",
         rt.stage,
-        thresholds.side_m,
-        thresholds.front_m
+        cfg.policy,
+        cfg.lo.side_m,
+        cfg.lo.front_m,
+        cfg.hi.side_m,
+        cfg.hi.front_m,
+        if cfg.visit_memory { "on" } else { "off" }
     );
     let waitset = rt.waitset()?;
     let guard = waitset
@@ -31,31 +39,37 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             return Ok(LoopControl::Continue);
         }
         ranges.clear_events();
+        sent.clear_events();
+        while let Some(report) = sent.receive()? {
+            let a = report.payload();
+            // Byte 4 of a PSC position command is its ramp.
+            nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.bytes[4]);
+        }
         while let Some(report) = ranges.receive()? {
             let received_ns = monotonic_ns();
             rt.count_in(1);
             rt.set_drops(ranges.dropped());
             let r = report.payload();
-            let sides = SideRanges::from_windows(&r.windows, r.window_count as usize);
-            let choice = reference_decision(&sides, &thresholds);
+            let d = nav.decide(&r.windows, r.window_count as usize, received_ns);
             let decision = Decision {
                 frame_id: r.frame_id,
                 capture_ns: r.capture_ns,
                 published_ns: monotonic_ns(),
-                command: choice.command as u32,
-                intersection: choice.intersection as u32,
-                wall_left: choice.walls.left as u32 as f32,
-                wall_front: choice.walls.front as u32 as f32,
-                wall_right: choice.walls.right as u32 as f32,
-                turn_angle_deg: choice.turn_angle_deg as f32,
-                ramp: choice.ramp,
-                policy: Policy::Reference as u32,
+                command: d.command as u32,
+                intersection: d.intersection as u32,
+                wall_left: d.memberships.left as f32,
+                wall_front: d.memberships.front as f32,
+                wall_right: d.memberships.right as f32,
+                turn_angle_deg: d.turn_angle_deg as f32,
+                ramp: d.ramp,
+                policy: policy as u32,
                 reserved: [0; 2],
             };
             rt.set_note(format!(
-                "{} {}",
-                choice.intersection.label(),
-                choice.command.label()
+                "{} {} cells {}",
+                d.intersection.label(),
+                d.command.label(),
+                nav.visits().distinct_cells()
             ));
             match decisions.publish_copy(&decision) {
                 Ok(_) => rt.count_out(monotonic_ns() - received_ns),

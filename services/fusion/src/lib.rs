@@ -6,7 +6,7 @@ pub mod canny;
 use hvs_shared::config::RangeStatistic;
 use hvs_shared::messages::{DISPARITY_SCALE, MAX_RANGE_WINDOWS, RangeSource, RangeWindow};
 
-pub use canny::{Canny, EDGE};
+pub use canny::{Canny, EDGE, sobel_edges};
 
 /// Camera geometry needed to turn disparity into distance at one resolution.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,6 +44,44 @@ pub fn fuse(edges: &[u8], disparity_q8: &[u16], fused_q8: &mut [u16]) -> (u32, u
     (edge_px, valid)
 }
 
+/// How the windows' ranges are computed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RangeParams {
+    /// Number of equal vertical windows (1..=MAX_RANGE_WINDOWS).
+    pub window_count: usize,
+    /// Disparity to distance.
+    pub depth: DepthModel,
+    /// Statistic reported as `range_m`.
+    pub statistic: RangeStatistic,
+    /// Percentile reported as `near_m`, 0..=50.
+    pub near_percentile: f64,
+    /// Camera height above the floor, metres (level camera).
+    pub camera_height_m: f64,
+    /// Points below this height are floor (0 disables).
+    pub min_height_m: f64,
+    /// Points above this height are ignored (0 disables).
+    pub max_height_m: f64,
+}
+
+impl RangeParams {
+    /// The parameters of a config at an image `width`.
+    pub fn from_config(config: &hvs_shared::config::HvsConfig, width: usize) -> Self {
+        let f = &config.fusion;
+        Self {
+            window_count: f.windows as usize,
+            depth: DepthModel {
+                focal_px: config.camera.focal_px(width),
+                baseline_m: config.camera.baseline_m,
+            },
+            statistic: f.statistic,
+            near_percentile: f.near_percentile,
+            camera_height_m: config.camera.height_m,
+            min_height_m: f.min_height_m,
+            max_height_m: f.max_height_m,
+        }
+    }
+}
+
 /// Ranges of the fused map over `window_count` equal vertical windows, left to right.
 #[derive(Debug, Default)]
 pub struct WindowRanger {
@@ -56,28 +94,43 @@ impl WindowRanger {
         Self::default()
     }
 
-    /// Computes each window's ranges from a fused disparity map (`width x height`, 1/256 px,
-    /// 0 = no data). `statistic` picks `range_m`; `mean_m` (the reference) and `near_m` (10th
-    /// percentile: the nearest obstacle) are always filled.
+    /// Computes each window's ranges from a fused disparity map (`width` columns, 1/256 px,
+    /// 0 = no data). Points on the floor or above `max_height_m` are left out: a level camera
+    /// at height `h` sees a pixel of row `v` with disparity `d` at height
+    /// `h - (v - cy) * b / d` (the reference had no such filter: floor texture pulled its
+    /// ranges down). `range_m` is the configured statistic; `mean_m` (the reference) and
+    /// `near_m` (the near percentile) are always filled.
     pub fn compute(
         &mut self,
         fused_q8: &[u16],
         width: usize,
-        window_count: usize,
-        depth: DepthModel,
-        statistic: RangeStatistic,
+        p: &RangeParams,
         source: RangeSource,
     ) -> [RangeWindow; MAX_RANGE_WINDOWS] {
-        let window_count = window_count.clamp(1, MAX_RANGE_WINDOWS);
+        let window_count = p.window_count.clamp(1, MAX_RANGE_WINDOWS);
         self.ranges.resize_with(window_count, Vec::new);
         self.ranges.iter_mut().for_each(Vec::clear);
-        for row in fused_q8.chunks_exact(width) {
+        let height = fused_q8.len() / width.max(1);
+        let cy = (height as f64 - 1.0) / 2.0;
+        let b = p.depth.baseline_m;
+        let fb = p.depth.focal_px * b;
+        for (v, row) in fused_q8.chunks_exact(width).enumerate() {
+            // Height of a point of this row = h - (v - cy) * b / d: floor and ceiling limits
+            // become limits on d for the whole row.
+            let dv = v as f64 - cy;
             for (x, &d) in row.iter().enumerate() {
-                if d != 0 {
-                    let w = x * window_count / width;
-                    let range = depth.range_m(d as f64 / DISPARITY_SCALE as f64);
-                    self.ranges[w].push(range as f32);
+                if d == 0 {
+                    continue;
                 }
+                let d_px = d as f64 / DISPARITY_SCALE as f64;
+                let height_m = p.camera_height_m - dv * b / d_px;
+                if (p.min_height_m > 0.0 && height_m < p.min_height_m)
+                    || (p.max_height_m > 0.0 && height_m > p.max_height_m)
+                {
+                    continue;
+                }
+                let w = x * window_count / width;
+                self.ranges[w].push((fb / d_px) as f32);
             }
         }
         let mut out = [RangeWindow::default(); MAX_RANGE_WINDOWS];
@@ -88,18 +141,28 @@ impl WindowRanger {
             ranges.sort_unstable_by(f32::total_cmp);
             let n = ranges.len();
             let mean = ranges.iter().map(|&r| r as f64).sum::<f64>() / n as f64;
-            let median = ranges[n / 2];
-            let near = ranges[n / 10];
+            let pct = |q: f64| ranges[((n - 1) as f64 * q / 100.0).round() as usize];
+            let near = pct(p.near_percentile);
+            let trimmed = {
+                let cut = n / 5;
+                let mid = &ranges[cut..n - cut];
+                mid.iter().map(|&r| r as f64).sum::<f64>() / mid.len() as f64
+            };
+            // Confidence: evidence (50 pixels give 0.5, 200 give 0.8) times agreement (the
+            // interquartile range relative to the median).
+            let spread = (pct(75.0) - pct(25.0)) as f64 / pct(50.0).max(1e-3) as f64;
+            let evidence = n as f64 / (n as f64 + 50.0);
             *slot = RangeWindow {
-                range_m: match statistic {
+                range_m: match p.statistic {
                     RangeStatistic::Mean => mean as f32,
-                    RangeStatistic::Median => median,
+                    RangeStatistic::Median => pct(50.0),
+                    RangeStatistic::TrimmedMean => trimmed as f32,
+                    RangeStatistic::Percentile => near,
                 },
                 near_m: near,
                 mean_m: mean as f32,
                 valid_px: n as u32,
-                // Saturates with the evidence: 50 pixels give 0.5, 200 give 0.8.
-                confidence: n as f32 / (n as f32 + 50.0),
+                confidence: (evidence / (1.0 + spread)) as f32,
                 source: source as u32,
             };
         }
@@ -107,16 +170,95 @@ impl WindowRanger {
     }
 }
 
-/// Merges the fast path's windows with a fresh long-range result: a window the fast path has
-/// no data for takes the long-range value.
+/// Edges, fused map and window ranges of one resolution, with its buffers: what the fusion
+/// stage runs for every frame of a path.
+#[derive(Debug)]
+pub struct FusionPath {
+    canny: Canny,
+    ranger: WindowRanger,
+    edges: Vec<u8>,
+    fused: Vec<u16>,
+    width: usize,
+    height: usize,
+    params: RangeParams,
+    detector: hvs_shared::config::EdgeDetector,
+    low: u32,
+    high: u32,
+    source: RangeSource,
+}
+
+impl FusionPath {
+    /// The path for `width x height` images of a config.
+    pub fn new(
+        config: &hvs_shared::config::HvsConfig,
+        width: usize,
+        height: usize,
+        source: RangeSource,
+    ) -> Self {
+        let f = &config.fusion;
+        Self {
+            canny: Canny::new(),
+            ranger: WindowRanger::new(),
+            edges: vec![0; width * height],
+            fused: vec![0; width * height],
+            width,
+            height,
+            params: RangeParams::from_config(config, width),
+            detector: f.edges,
+            low: f.canny_low,
+            high: f.canny_high,
+            source,
+        }
+    }
+
+    /// Ranges of one frame: returns (windows, edge pixels, edge pixels with disparity).
+    /// `left` and `disparity_q8` must hold `width * height` values.
+    pub fn ranges(
+        &mut self,
+        left: &[u8],
+        disparity_q8: &[u16],
+    ) -> ([RangeWindow; MAX_RANGE_WINDOWS], u32, u32) {
+        let (w, h) = (self.width, self.height);
+        match self.detector {
+            hvs_shared::config::EdgeDetector::Canny => {
+                self.canny
+                    .detect(left, w, h, self.low, self.high, &mut self.edges);
+            }
+            hvs_shared::config::EdgeDetector::Sobel => {
+                sobel_edges(left, w, h, self.high, &mut self.edges);
+            }
+        }
+        let (edge_px, valid) = fuse(&self.edges, disparity_q8, &mut self.fused);
+        let windows = self
+            .ranger
+            .compute(&self.fused, w, &self.params, self.source);
+        (windows, edge_px, valid)
+    }
+
+    /// The edge map of the last frame (`EDGE` = edge).
+    pub fn edges(&self) -> &[u8] {
+        &self.edges
+    }
+
+    /// The fused map of the last frame (disparity at edge pixels, 1/256 px).
+    pub fn fused(&self) -> &[u16] {
+        &self.fused
+    }
+}
+
+/// Merges the fast path's windows with a fresh long-range result: a window where the fast
+/// path has fewer than `min_valid_px` valid pixels (it cannot see beyond its disparity range,
+/// about 2 m at 320x240) takes the long-range value when that one has more evidence. Each
+/// window's `source` says which path it came from.
 pub fn merge_windows(
     lo: &[RangeWindow; MAX_RANGE_WINDOWS],
     hi: Option<&[RangeWindow; MAX_RANGE_WINDOWS]>,
+    min_valid_px: u32,
 ) -> [RangeWindow; MAX_RANGE_WINDOWS] {
     let mut out = *lo;
     if let Some(hi) = hi {
         for (o, h) in out.iter_mut().zip(hi) {
-            if o.valid_px == 0 && h.valid_px > 0 {
+            if o.valid_px < min_valid_px && h.valid_px > o.valid_px {
                 *o = *h;
             }
         }
@@ -133,10 +275,36 @@ mod tests {
         baseline_m: 0.06,
     };
 
+    /// Windows over the whole map, no height filter.
+    fn params(window_count: usize, statistic: RangeStatistic) -> RangeParams {
+        RangeParams {
+            window_count,
+            depth: DEPTH,
+            statistic,
+            near_percentile: 10.0,
+            camera_height_m: 0.25,
+            min_height_m: 0.0,
+            max_height_m: 0.0,
+        }
+    }
+
     #[test]
     fn range_is_f_b_over_d() {
         assert!((DEPTH.range_m(19.2) - 1.0).abs() < 1e-9);
         assert!((DEPTH.range_m(9.6) - 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn reference_profile_reproduces_the_printed_feet() {
+        // f = 380 px, b = 0.1982 ft = 60.4 mm: distance_ft = 380 * 0.1982 / d.
+        let reference = DepthModel {
+            focal_px: 380.0,
+            baseline_m: 0.1982 * hvs_shared::config::M_PER_FT, // 60.41 mm
+        };
+        for d in [9.0, 25.5, 55.0] {
+            let ft = reference.range_m(d) / hvs_shared::config::M_PER_FT;
+            assert!((ft - 380.0 * 0.1982 / d).abs() < 1e-3, "d {d}: {ft} ft");
+        }
     }
 
     #[test]
@@ -162,9 +330,7 @@ mod tests {
         let w = WindowRanger::new().compute(
             &fused,
             width,
-            3,
-            DEPTH,
-            RangeStatistic::Mean,
+            &params(3, RangeStatistic::Mean),
             RangeSource::Lo,
         );
         assert_eq!(w[0].valid_px, 6);
@@ -178,57 +344,103 @@ mod tests {
     }
 
     #[test]
-    fn median_resists_an_outlier_the_mean_does_not() {
-        let width = 5;
+    fn robust_statistics_resist_an_outlier_the_mean_does_not() {
+        let width = 10;
         let mut fused = vec![(19.2 * 256.0) as u16; width];
-        fused[4] = 256; // 1 px disparity = 19.2 m: a gross mismatch
+        fused[9] = 256; // 1 px disparity = 19.2 m: a gross mismatch
         let mut ranger = WindowRanger::new();
-        let mean = ranger.compute(
-            &fused,
-            width,
-            1,
-            DEPTH,
-            RangeStatistic::Mean,
-            RangeSource::Lo,
-        )[0];
-        let median = ranger.compute(
-            &fused,
-            width,
-            1,
-            DEPTH,
+        let mut run =
+            |statistic| ranger.compute(&fused, width, &params(1, statistic), RangeSource::Lo)[0];
+        let mean = run(RangeStatistic::Mean);
+        assert!(mean.range_m > 2.0, "{mean:?}");
+        for statistic in [
             RangeStatistic::Median,
-            RangeSource::Lo,
-        )[0];
-        assert!(mean.range_m > 4.0, "{mean:?}");
-        assert!((median.range_m - 1.0).abs() < 0.01, "{median:?}");
+            RangeStatistic::TrimmedMean,
+            RangeStatistic::Percentile,
+        ] {
+            let w = run(statistic);
+            assert!((w.range_m - 1.0).abs() < 0.01, "{statistic:?}: {w:?}");
+        }
     }
 
     #[test]
-    fn merge_fills_only_empty_fast_path_windows() {
+    fn near_percentile_finds_the_nearest_obstacle_and_confidence_follows_agreement() {
+        let width = 100;
+        // 70 pixels at 2 m, 30 at 0.5 m (an obstacle in front of a wall).
+        let fused: Vec<u16> = (0..width)
+            .map(|x| {
+                if x < 30 {
+                    (38.4 * 256.0) as u16
+                } else {
+                    (9.6 * 256.0) as u16
+                }
+            })
+            .collect();
+        let w = WindowRanger::new().compute(
+            &fused,
+            width,
+            &params(1, RangeStatistic::Median),
+            RangeSource::Lo,
+        )[0];
+        assert!((w.near_m - 0.5).abs() < 0.01, "{w:?}");
+        assert!((w.range_m - 2.0).abs() < 0.01, "{w:?}");
+        let uniform = vec![(9.6 * 256.0) as u16; width];
+        let u = WindowRanger::new().compute(
+            &uniform,
+            width,
+            &params(1, RangeStatistic::Median),
+            RangeSource::Lo,
+        )[0];
+        assert!(u.confidence > w.confidence, "{u:?} vs {w:?}");
+    }
+
+    #[test]
+    fn floor_and_ceiling_points_are_left_out() {
+        // A level camera 0.25 m up, f = 320, b = 0.06, 240 rows (cy = 119.5). The floor at
+        // row v has d = (v - cy) * b / 0.25; a wall point in the middle row has height 0.25.
+        let (width, height) = (4, 240);
+        let mut fused = vec![0u16; width * height];
+        let floor_row = 200usize;
+        let d_floor = (floor_row as f64 - 119.5) * 0.06 / 0.25 * 320.0 / 320.0;
+        // d in px: (v - cy) * f * b / (h * f)... with f = 320: d = (v - cy) * b / h * f / f.
+        let d_floor_px = (floor_row as f64 - 119.5) * 0.06 * 320.0 / (0.25 * 320.0);
+        assert!((d_floor - d_floor_px).abs() < 1e-9);
+        fused[floor_row * width] = (d_floor_px * 256.0) as u16;
+        fused[120 * width + 1] = (19.2 * 256.0) as u16; // wall at 1 m, mid height
+        fused[2 * width + 2] = (1.0 * 256.0) as u16; // 19 m away near the top: far above 1.5 m
+        let mut p = params(1, RangeStatistic::Mean);
+        p.min_height_m = 0.05;
+        p.max_height_m = 1.5;
+        let w = WindowRanger::new().compute(&fused, width, &p, RangeSource::Lo)[0];
+        assert_eq!(w.valid_px, 1, "{w:?}");
+        assert!((w.range_m - 1.0).abs() < 0.01);
+        p.min_height_m = 0.0;
+        p.max_height_m = 0.0;
+        let all = WindowRanger::new().compute(&fused, width, &p, RangeSource::Lo)[0];
+        assert_eq!(all.valid_px, 3);
+    }
+
+    #[test]
+    fn merge_takes_the_long_range_value_where_the_fast_path_is_thin() {
+        let win = |range_m: f32, valid_px: u32, source: RangeSource| RangeWindow {
+            range_m,
+            valid_px,
+            source: source as u32,
+            ..Default::default()
+        };
         let mut lo = [RangeWindow::default(); MAX_RANGE_WINDOWS];
-        lo[0] = RangeWindow {
-            range_m: 1.0,
-            valid_px: 10,
-            source: 1,
-            ..Default::default()
-        };
+        lo[0] = win(1.0, 100, RangeSource::Lo);
+        lo[1] = win(1.9, 5, RangeSource::Lo);
         let mut hi = [RangeWindow::default(); MAX_RANGE_WINDOWS];
-        hi[0] = RangeWindow {
-            range_m: 3.0,
-            valid_px: 10,
-            source: 2,
-            ..Default::default()
-        };
-        hi[1] = RangeWindow {
-            range_m: 4.0,
-            valid_px: 10,
-            source: 2,
-            ..Default::default()
-        };
-        let m = merge_windows(&lo, Some(&hi));
+        hi[0] = win(3.0, 300, RangeSource::Hi);
+        hi[1] = win(4.0, 200, RangeSource::Hi);
+        hi[2] = win(5.0, 50, RangeSource::Hi);
+        let m = merge_windows(&lo, Some(&hi), 30);
         assert_eq!(m[0].range_m, 1.0);
+        assert_eq!(m[0].source, RangeSource::Lo as u32);
         assert_eq!(m[1].range_m, 4.0);
         assert_eq!(m[1].source, RangeSource::Hi as u32);
-        assert_eq!(merge_windows(&lo, None), lo);
+        assert_eq!(m[2].source, RangeSource::Hi as u32);
+        assert_eq!(merge_windows(&lo, None, 30), lo);
     }
 }

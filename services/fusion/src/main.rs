@@ -6,7 +6,7 @@
 use std::collections::VecDeque;
 use std::process::ExitCode;
 
-use hvs_fusion::{Canny, DepthModel, WindowRanger, fuse, merge_windows};
+use hvs_fusion::{FusionPath, merge_windows};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::ipc::{ReceivedSample, TopicSubscriber};
 use hvs_shared::messages::{
@@ -28,62 +28,6 @@ struct HiRanges {
     frame_id: u64,
     capture_ns: u64,
     windows: [RangeWindow; MAX_RANGE_WINDOWS],
-}
-
-/// Edge detection and ranging for one resolution, with its buffers.
-struct PathRanger {
-    canny: Canny,
-    ranger: WindowRanger,
-    edges: Vec<u8>,
-    fused: Vec<u16>,
-    depth: DepthModel,
-    source: RangeSource,
-}
-
-impl PathRanger {
-    fn new(width: usize, height: usize, rt: &StageRuntime, source: RangeSource) -> Self {
-        Self {
-            canny: Canny::new(),
-            ranger: WindowRanger::new(),
-            edges: vec![0; width * height],
-            fused: vec![0; width * height],
-            depth: DepthModel {
-                focal_px: rt.config.camera.focal_px(width),
-                baseline_m: rt.config.camera.baseline_m,
-            },
-            source,
-        }
-    }
-
-    /// Returns (windows, edge pixels, edge pixels with disparity).
-    fn ranges(
-        &mut self,
-        left: &[u8],
-        disparity_q8: &[u16],
-        width: usize,
-        height: usize,
-        rt: &StageRuntime,
-    ) -> ([RangeWindow; MAX_RANGE_WINDOWS], u32, u32) {
-        let f = &rt.config.fusion;
-        self.canny.detect(
-            left,
-            width,
-            height,
-            f.canny_low,
-            f.canny_high,
-            &mut self.edges,
-        );
-        let (edge_px, valid) = fuse(&self.edges, disparity_q8, &mut self.fused);
-        let windows = self.ranger.compute(
-            &self.fused,
-            width,
-            f.windows as usize,
-            self.depth,
-            f.statistic,
-            self.source,
-        );
-        (windows, edge_px, valid)
-    }
 }
 
 /// Moves every queued frame into `held`, keeping the newest `HELD_FRAMES`.
@@ -112,10 +56,11 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
     let mut held_lo: VecDeque<ReceivedSample<StereoFrame320x240>> = VecDeque::new();
     let mut held_hi: VecDeque<ReceivedSample<StereoFrame640x480>> = VecDeque::new();
-    let mut lo_path = PathRanger::new(320, 240, rt, RangeSource::Lo);
-    let mut hi_path = PathRanger::new(640, 480, rt, RangeSource::Hi);
+    let mut lo_path = FusionPath::new(&rt.config, 320, 240, RangeSource::Lo);
+    let mut hi_path = FusionPath::new(&rt.config, 640, 480, RangeSource::Hi);
     let mut latest_hi: Option<HiRanges> = None;
     let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
+    let min_valid_px = rt.config.fusion.min_valid_px;
     let mut unpaired = 0u64;
     rt.set_note(format!("{} windows", rt.config.fusion.windows));
 
@@ -139,7 +84,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 {
                     Some(frame) => {
                         let (windows, _, _) =
-                            hi_path.ranges(&frame.payload().left, &m.disparity_q8, 640, 480, rt);
+                            hi_path.ranges(&frame.payload().left, &m.disparity_q8);
                         latest_hi = Some(HiRanges {
                             frame_id: m.header.frame_id,
                             capture_ns: m.header.capture_ns,
@@ -166,7 +111,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     continue;
                 };
                 let (lo_windows, edge_px, valid_edge_px) =
-                    lo_path.ranges(&frame.payload().left, &m.disparity_q8, 320, 240, rt);
+                    lo_path.ranges(&frame.payload().left, &m.disparity_q8);
                 let hi = latest_hi
                     .as_ref()
                     .filter(|h| m.header.capture_ns.saturating_sub(h.capture_ns) <= hi_max_age_ns);
@@ -185,7 +130,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     hi_age_ns: hi.map_or(0, |h| m.header.capture_ns.saturating_sub(h.capture_ns)),
                     window_count: rt.config.fusion.windows,
                     edge_px,
-                    windows: merge_windows(&lo_windows, hi.map(|h| &h.windows)),
+                    windows: merge_windows(&lo_windows, hi.map(|h| &h.windows), min_valid_px),
                     valid_edge_px,
                     reserved: 0,
                 };

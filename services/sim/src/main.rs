@@ -16,7 +16,7 @@ use hvs_shared::messages::{
 };
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
-use hvs_sim::{GridMap, PscPty, SimClock, SimConfig, SimWorld, StereoRig, WebcamDefects, lock_psc};
+use hvs_sim::{GridMap, PscPty, SimClock, SimConfig, SimWorld, lock_psc};
 
 fn main() -> ExitCode {
     run_stage("sim", run)
@@ -26,31 +26,8 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let cfg = rt.config.clone();
     let map_path = cfg.resolve_path(&cfg.sim.map);
     let map = GridMap::load(&map_path)?;
-    let mut rig = StereoRig::new(HI_WIDTH, HI_HEIGHT, cfg.camera.focal_px(HI_WIDTH));
-    rig.baseline_m = cfg.camera.baseline_m;
-    let d = &cfg.sim.defects;
-    let defects = WebcamDefects {
-        gain: d.gain,
-        offset: d.offset,
-        noise_sigma: d.noise_sigma,
-        vertical_shift_px: d.vertical_shift_px,
-        right_delay_s: d.right_delay_ms / 1000.0,
-    };
-    let robot = hvs_sim::RobotParams {
-        left_channel: cfg.actuator.left_channel,
-        right_channel: cfg.actuator.right_channel,
-        ..Default::default()
-    };
     let start = map.start_pose();
-    let mut world = SimWorld::new(
-        map,
-        SimConfig {
-            rig,
-            defects,
-            robot,
-            seed: cfg.sim.seed,
-        },
-    );
+    let mut world = SimWorld::new(map, SimConfig::from_hvs(&cfg, HI_WIDTH, HI_HEIGHT));
     let clock = SimClock::new();
     let run_folder = run_dir(&cfg.instance);
     std::fs::create_dir_all(&run_folder)

@@ -45,6 +45,32 @@ impl Default for SimConfig {
     }
 }
 
+impl SimConfig {
+    /// The simulator settings of an hvs config, rendering `width x height` images: camera
+    /// focal length and baseline, webcam defects, PSC channels and seed.
+    pub fn from_hvs(config: &hvs_shared::config::HvsConfig, width: usize, height: usize) -> Self {
+        let mut rig = StereoRig::new(width, height, config.camera.focal_px(width));
+        rig.baseline_m = config.camera.baseline_m;
+        let d = &config.sim.defects;
+        SimConfig {
+            rig,
+            defects: WebcamDefects {
+                gain: d.gain,
+                offset: d.offset,
+                noise_sigma: d.noise_sigma,
+                vertical_shift_px: d.vertical_shift_px,
+                right_delay_s: d.right_delay_ms / 1000.0,
+            },
+            robot: RobotParams {
+                left_channel: config.actuator.left_channel,
+                right_channel: config.actuator.right_channel,
+                ..RobotParams::default()
+            },
+            seed: config.sim.seed,
+        }
+    }
+}
+
 /// Errors of [`SimWorld::render`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SimRenderError {

@@ -1,0 +1,238 @@
+//! `hvs sim drive`: the robot's algorithms in a closed loop with the simulator, in one
+//! process and faster than real time.
+//!
+//! Every step renders the 320x240 stereo pair the robot sees, runs the configured stereo
+//! matcher, the fusion path (edges, fused map, window ranges), the decision navigator, and the
+//! actuator's commander, whose PSC bytes go to the simulator's PSC emulator with their wire
+//! timing; the simulated robot then moves for one step. The same library code runs in the
+//! stage processes; only the iceoryx2 hops and the 640x480 worker are left out (the fast path
+//! alone drives), so that minutes of driving take seconds and are repeatable. Used by the
+//! closed-loop tests and to measure coverage with and without the visit memory.
+
+use std::collections::{BTreeMap, HashSet};
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use hvs_actuator::commander::{Commander, DecisionInput};
+use hvs_decision::Navigator;
+use hvs_fusion::FusionPath;
+use hvs_shared::config::HvsConfig;
+use hvs_shared::messages::{IntersectionType, MotionCommand, RangeSource};
+use hvs_sim::{GridMap, Pose, SimConfig, SimWorld, lock_psc};
+use hvs_stereo::{ImageView, matcher_for};
+
+/// What `hvs sim drive` runs.
+#[derive(Debug, Clone)]
+pub struct DriveOptions {
+    /// Map file.
+    pub map: std::path::PathBuf,
+    /// Start pose (default: the map's).
+    pub pose: Option<Pose>,
+    /// Simulated seconds.
+    pub duration_s: f64,
+    /// Decision rate, Hz.
+    pub rate_hz: f64,
+    /// Override of the visit memory setting.
+    pub visit_memory: Option<bool>,
+}
+
+/// The outcome of a drive.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DriveReport {
+    /// Map name.
+    pub map: String,
+    /// Simulated seconds driven.
+    pub duration_s: f64,
+    /// Decisions made.
+    pub decisions: u64,
+    /// Whether the visit memory was on.
+    pub visit_memory: bool,
+    /// Collisions with walls (sim ground truth).
+    pub collisions: u64,
+    /// Distinct map cells the robot's centre entered (sim ground truth).
+    pub distinct_cells: usize,
+    /// Distance driven, metres (sim odometer).
+    pub distance_m: f64,
+    /// Start pose `(x_m, y_m, heading_deg)`.
+    pub start: (f64, f64, f64),
+    /// Final pose `(x_m, y_m, heading_deg)`.
+    pub end: (f64, f64, f64),
+    /// Final position in the start frame: metres ahead, metres to the left.
+    pub end_ahead_m: f64,
+    /// See `end_ahead_m`.
+    pub end_left_m: f64,
+    /// Decisions per intersection type (labels).
+    pub intersections: BTreeMap<String, u64>,
+    /// Intersection type of each decision before the first turn (labels, in order).
+    pub before_first_turn: Vec<String>,
+    /// The intersection type and command of the first turn decision, if any.
+    pub first_turn: Option<(String, String)>,
+    /// Commands sent per motion (labels).
+    pub commands: BTreeMap<String, u64>,
+    /// Wall-clock seconds the drive took.
+    pub wall_s: f64,
+}
+
+/// Runs a drive.
+pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport> {
+    if !(opts.rate_hz > 0.0 && opts.rate_hz <= 60.0) {
+        bail!("--rate-hz {} must be in (0, 60]", opts.rate_hz);
+    }
+    if !(opts.duration_s > 0.0 && opts.duration_s <= 7200.0) {
+        bail!(
+            "--duration {} must be in (0, 7200] seconds",
+            opts.duration_s
+        );
+    }
+    let map = GridMap::load(&opts.map).with_context(|| format!("map {}", opts.map.display()))?;
+    let (w, h) = (320usize, 240usize);
+    let start = opts.pose.unwrap_or_else(|| map.start_pose());
+    let map_name = map.name().to_string();
+    let cell_m = map.cell_m();
+    let mut world = SimWorld::new(map, SimConfig::from_hvs(config, w, h));
+    world.set_pose(start);
+    let mut matcher = matcher_for(&config.stereo.lo).context("stereo.lo")?;
+    let mut fusion = FusionPath::new(config, w, h, RangeSource::Lo);
+    let mut decision_cfg = config.decision.clone();
+    if let Some(m) = opts.visit_memory {
+        decision_cfg.visit_memory = m;
+    }
+    let mut nav = Navigator::new(&decision_cfg, &config.actuator.pulses);
+    let mut commander = Commander::new(&config.actuator);
+    let psc = world.psc();
+
+    let (mut left, mut right) = (vec![0u8; w * h], vec![0u8; w * h]);
+    let mut disparity = vec![0u16; w * h];
+    let mut cells = HashSet::new();
+    let mut intersections: BTreeMap<String, u64> = BTreeMap::new();
+    let mut commands: BTreeMap<String, u64> = BTreeMap::new();
+    let mut before_first_turn = Vec::new();
+    let mut turned = false;
+    let mut first_turn = None;
+    let dt = 1.0 / opts.rate_hz;
+    let steps = (opts.duration_s * opts.rate_hz).round() as u64;
+    let started = std::time::Instant::now();
+    let ns = |t: f64| (t * 1e9) as u64;
+    // Per-decision trace on stderr, for tuning.
+    let trace = std::env::var_os("HVS_DRIVE_TRACE").is_some();
+    for step in 0..steps {
+        let t = step as f64 * dt;
+        world
+            .render(t, &mut left, &mut right, None)
+            .context("rendering")?;
+        let lv = ImageView::new(&left, w, h)?;
+        let rv = ImageView::new(&right, w, h)?;
+        matcher.compute(lv, rv, &mut disparity)?;
+        let (windows, _, _) = fusion.ranges(&left, &disparity);
+        // The decision is made (and published) after the frame's processing time.
+        let now = ns(t) + 1;
+        let nd = nav.decide(&windows, config.fusion.windows as usize, now);
+        if trace {
+            let p = world.pose();
+            eprintln!(
+                "t {t:6.2} coll {} pose ({:5.2},{:5.2},{:6.1}) ranges {} mem {:.2}/{:.2}/{:.2} {} {} dr ({:5.2},{:5.2},{:6.1})",
+                world.collisions(),
+                p.x_m,
+                p.y_m,
+                p.heading_deg(),
+                windows[..config.fusion.windows as usize]
+                    .iter()
+                    .map(|w| format!("{:.2}m/{:.2}n/{}px", w.range_m, w.near_m, w.valid_px))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+                nd.memberships.left,
+                nd.memberships.front,
+                nd.memberships.right,
+                nd.intersection.label(),
+                nd.command.label(),
+                nd.pose.x_m,
+                nd.pose.y_m,
+                nd.pose.heading_rad.to_degrees()
+            );
+        }
+        *intersections
+            .entry(nd.intersection.label().to_string())
+            .or_default() += 1;
+        if !turned && matches!(nd.command, MotionCommand::Left | MotionCommand::Right) {
+            turned = true;
+            first_turn = Some((
+                nd.intersection.label().to_string(),
+                nd.command.label().to_string(),
+            ));
+        }
+        if !turned && nd.intersection != IntersectionType::Unknown {
+            before_first_turn.push(nd.intersection.label().to_string());
+        }
+        commander.on_decision(DecisionInput {
+            frame_id: step,
+            capture_ns: ns(t),
+            published_ns: now,
+            command: nd.command,
+            ramp: nd.ramp.min(63) as u8,
+        });
+        // The actuator polls the wire until the next frame.
+        let mut poll_t = t;
+        while poll_t < t + dt {
+            if let Some(out) = commander.poll(ns(poll_t)) {
+                lock_psc(&psc).receive(&out.bytes, poll_t);
+                commander.mark_sent(ns(poll_t), &out);
+                nav.on_sent(ns(poll_t), out.left_pw, out.right_pw, out.ramp);
+                *commands.entry(out.command.label().to_string()).or_default() += 1;
+            }
+            poll_t += 0.005;
+        }
+        world.advance_to(t + dt);
+        let p = world.pose();
+        cells.insert((
+            (p.x_m / cell_m).floor() as i64,
+            (p.y_m / cell_m).floor() as i64,
+        ));
+    }
+    let end = world.pose();
+    let delta = end.position() - start.position();
+    let truth = world.ground_truth();
+    Ok(DriveReport {
+        map: map_name,
+        duration_s: steps as f64 * dt,
+        decisions: steps,
+        visit_memory: decision_cfg.visit_memory,
+        collisions: truth.collisions,
+        distinct_cells: cells.len(),
+        distance_m: truth.odometer_m,
+        start: (start.x_m, start.y_m, start.heading_deg()),
+        end: (end.x_m, end.y_m, end.heading_deg()),
+        end_ahead_m: delta.dot(start.forward()),
+        end_left_m: delta.dot(start.left()),
+        intersections,
+        before_first_turn,
+        first_turn,
+        commands,
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// `hvs sim drive`: runs and prints the report.
+pub fn run(config_path: &Path, opts: &DriveOptions, json: bool) -> Result<()> {
+    let config = HvsConfig::load(config_path)
+        .with_context(|| format!("config {}", config_path.display()))?;
+    let r = drive(&config, opts)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(());
+    }
+    println!(
+        "map {}: {:.0} s simulated in {:.1} s, {} decisions, visit memory {}",
+        r.map,
+        r.duration_s,
+        r.wall_s,
+        r.decisions,
+        if r.visit_memory { "on" } else { "off" }
+    );
+    println!(
+        "collisions {}  distinct cells {}  distance {:.1} m  end {:.2} m ahead, {:.2} m left",
+        r.collisions, r.distinct_cells, r.distance_m, r.end_ahead_m, r.end_left_m
+    );
+    println!("intersections: {:?}", r.intersections);
+    println!("commands sent: {:?}", r.commands);
+    Ok(())
+}
