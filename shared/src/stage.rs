@@ -89,6 +89,29 @@ pub fn init_tracing() {
     });
 }
 
+/// The parent process id when the stage started (0 until [`run_stage`] records it).
+static START_PPID: std::sync::atomic::AtomicI32 = std::sync::atomic::AtomicI32::new(0);
+
+/// When the supervisor is gone (killed: the kernel's parent-death signal is what asked this
+/// stage to stop), standard error is a pipe nobody reads. A write there fails with EPIPE, and
+/// a library that logs with `eprintln!` (iceoryx2's console logger does, warning about the
+/// dead supervisor's ports while the stage publishes its last samples) would panic and kill
+/// the stage before its orderly stop: the actuator would never send its final neutral. So
+/// standard error goes to /dev/null for the rest of the stage's life.
+fn silence_stderr_if_orphaned() {
+    let started = START_PPID.load(std::sync::atomic::Ordering::Relaxed);
+    if started == 0 || nix::unistd::getppid().as_raw() == started {
+        return;
+    }
+    if let Ok(null) = std::fs::OpenOptions::new().write(true).open("/dev/null") {
+        use std::os::fd::AsRawFd;
+        // SAFETY: dup2 onto fd 2 with a valid open descriptor; no Rust object owns fd 2.
+        unsafe {
+            libc::dup2(null.as_raw_fd(), 2);
+        }
+    }
+}
+
 /// Parses the stage command line, starts the runtime and runs `body`; maps the outcome to an
 /// exit code (0 clean stop, 1 runtime error, 2 bad configuration or arguments).
 pub fn run_stage<F>(role: &str, body: F) -> ExitCode
@@ -96,6 +119,10 @@ where
     F: FnOnce(&mut StageRuntime) -> Result<(), StageError>,
 {
     init_tracing();
+    START_PPID.store(
+        nix::unistd::getppid().as_raw(),
+        std::sync::atomic::Ordering::Relaxed,
+    );
     let args = StageArgs::parse();
     let mut runtime = match StageRuntime::start(&args, role) {
         Ok(rt) => rt,
@@ -331,6 +358,7 @@ impl StageRuntime {
             }
             match result {
                 Ok(WaitSetRunResult::TerminationRequest) => {
+                    silence_stderr_if_orphaned();
                     tracing::info!("{}: termination requested", self.stage);
                     return Ok(());
                 }

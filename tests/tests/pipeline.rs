@@ -370,7 +370,12 @@ fn sigkill_of_the_supervisor_stops_the_wheels() {
     while let Some(r) = sent.receive().expect("receive") {
         last = Some(*r.payload());
     }
-    let last = last.expect("the actuator reported what it sent");
+    let last = last.unwrap_or_else(|| {
+        panic!(
+            "the actuator reported nothing after the drain\n{}",
+            p.logs()
+        )
+    });
     assert_eq!(
         SendReason::from_code(last.reason),
         Some(SendReason::ShutdownNeutral),

@@ -56,7 +56,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let right_delay_ns = (cfg.sim.defects.right_delay_ms * 1e6) as u64;
     let mut frame_id = 0u64;
 
-    rt.run_loop(&waitset, |rt, id| {
+    let result = rt.run_loop(&waitset, |rt, id| {
         if !id.has_event_from(&tick) {
             return Ok(LoopControl::Continue);
         }
@@ -141,5 +141,14 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             rt.report_publish_error(&e);
         }
         Ok(LoopControl::Continue)
-    })
+    });
+    // Keep serving the PSC pty a little longer: when the supervisor dies, every stage gets
+    // SIGTERM at once, and the actuator's last words (neutral pulses) must still reach the
+    // simulated controller rather than a closed pty.
+    std::thread::sleep(PTY_LINGER);
+    drop(pty);
+    result
 }
+
+/// How long the PSC pty stays open after the stage stops.
+const PTY_LINGER: std::time::Duration = std::time::Duration::from_millis(400);
