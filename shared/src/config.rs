@@ -491,8 +491,8 @@ pub struct DecisionConfig {
     pub corridor_factor: f64,
     /// Weight of the newest frame in the smoothed memberships (1 = no smoothing).
     pub smoothing: f64,
-    /// Frames a new command must persist before it replaces the current one (Stop and
-    /// Reverse for a near front wall act at once).
+    /// Frames a new command must persist before it replaces the current one (a blocked
+    /// front acts at once).
     pub hold_frames: u32,
     /// Prefer the least visited branch at a junction (dead-reckoned visit grid).
     pub visit_memory: bool,

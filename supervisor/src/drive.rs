@@ -24,8 +24,8 @@ use hvs_stereo::{ImageView, matcher_for};
 /// What `hvs sim drive` runs.
 #[derive(Debug, Clone)]
 pub struct DriveOptions {
-    /// Map file.
-    pub map: std::path::PathBuf,
+    /// Map file (`None`: the config's `sim.map`).
+    pub map: Option<std::path::PathBuf>,
     /// Start pose (default: the map's).
     pub pose: Option<Pose>,
     /// Simulated seconds.
@@ -84,7 +84,11 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport> {
             opts.duration_s
         );
     }
-    let map = GridMap::load(&opts.map).with_context(|| format!("map {}", opts.map.display()))?;
+    let map_path = opts
+        .map
+        .clone()
+        .unwrap_or_else(|| config.resolve_path(&config.sim.map));
+    let map = GridMap::load(&map_path).with_context(|| format!("map {}", map_path.display()))?;
     let (w, h) = (320usize, 240usize);
     let start = opts.pose.unwrap_or_else(|| map.start_pose());
     let map_name = map.name().to_string();

@@ -292,6 +292,15 @@ impl Target {
     }
 }
 
+/// The config file to use: `given`, else the default (`config/sim.toml` in the current
+/// folder, else in the source tree).
+fn resolve_config(given: Option<PathBuf>) -> anyhow::Result<PathBuf> {
+    if let Some(path) = given {
+        return Ok(path);
+    }
+    default_config()
+}
+
 /// The default config: `config/sim.toml` in the current folder, else in the source tree.
 fn default_config() -> anyhow::Result<PathBuf> {
     let local = PathBuf::from("config/sim.toml");
@@ -377,10 +386,7 @@ fn main() -> ExitCode {
             duration,
             report,
         } => (|| {
-            let config_path = match config {
-                Some(c) => c,
-                None => default_config()?,
-            };
+            let config_path = resolve_config(config)?;
             let duration = duration.map(|d| seconds(d, "--duration")).transpose()?;
             run::run(&run::RunOptions {
                 config_path,
@@ -474,17 +480,7 @@ fn main() -> ExitCode {
                     json,
                 },
         } => (|| {
-            let config = match config {
-                Some(c) => c,
-                None => default_config()?,
-            };
-            let map = match map {
-                Some(m) => m,
-                None => {
-                    let cfg = hvs_shared::config::HvsConfig::load(&config)?;
-                    cfg.resolve_path(&cfg.sim.map)
-                }
-            };
+            let config = resolve_config(config)?;
             let pose = pose
                 .map(|p| p.parse::<hvs_sim::Pose>())
                 .transpose()
@@ -509,17 +505,11 @@ fn main() -> ExitCode {
                 base,
             } => stereo_cli::bench(&algo, &size, frames, export.as_deref(), json, &base),
             BenchCommand::Stages { config, frames } => (|| {
-                let config = match config {
-                    Some(c) => c,
-                    None => default_config()?,
-                };
+                let config = resolve_config(config)?;
                 bench_stages::run(&config, frames)
             })(),
             BenchCommand::Pipeline { config, duration } => (|| {
-                let config = match config {
-                    Some(c) => c,
-                    None => default_config()?,
-                };
+                let config = resolve_config(config)?;
                 bench::run_pipeline(config, seconds(duration, "--duration")?)
             })(),
             BenchCommand::IpcReceiver {

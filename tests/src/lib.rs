@@ -91,6 +91,19 @@ pub fn hvs(args: &[&str]) -> Output {
         .expect("run hvs")
 }
 
+/// Runs `hvs` with arguments to completion and requires success (the panic message names
+/// the command and carries its stderr).
+pub fn hvs_ok(args: &[&str]) -> Output {
+    let out = hvs(args);
+    assert!(
+        out.status.success(),
+        "hvs {} failed:\n{}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// A running `hvs run`, stopped when dropped.
 pub struct Pipeline {
     /// Instance name.

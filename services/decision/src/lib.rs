@@ -85,6 +85,16 @@ impl SideRanges {
         }
     }
 
+    /// The thresholds for side `i` (0 left, 1 middle, 2 right): those of the path its range
+    /// came from.
+    pub fn thresholds(&self, i: usize, cfg: &DecisionConfig) -> WallThresholds {
+        if self.sources[i] == RangeSource::Hi {
+            cfg.hi
+        } else {
+            cfg.lo
+        }
+    }
+
     /// Picks the reference's three windows from a range report.
     pub fn from_windows(windows: &[RangeWindow], window_count: usize) -> Self {
         let pick = |i: usize| {
@@ -244,19 +254,8 @@ pub fn near_membership(range_m: Option<f64>, threshold_m: f64, band: f64) -> f64
 /// `corridor_factor * a`, both sides count as walls. This is what reconciles the thesis's
 /// printed hallway example (2.675, 3.054, 2.910 ft: above `a` = 2.35 ft on both sides) with
 /// its other seven examples, which crisp thresholds already classify.
-pub fn fuzzy_memberships(
-    r: &SideRanges,
-    lo: &WallThresholds,
-    hi: &WallThresholds,
-    cfg: &DecisionConfig,
-) -> Memberships {
-    let t = |i: usize| {
-        if r.sources[i] == RangeSource::Hi {
-            hi
-        } else {
-            lo
-        }
-    };
+pub fn fuzzy_memberships(r: &SideRanges, cfg: &DecisionConfig) -> Memberships {
+    let t = |i: usize| r.thresholds(i, cfg);
     let band = cfg.fuzzy_band;
     let left = near_membership(r.left_m, t(0).side_m, band);
     let front = near_membership(r.middle_m, t(1).front_m, band);
@@ -535,11 +534,11 @@ impl Navigator {
         let sides = SideRanges::from_windows(windows, window_count);
         let idx = SideRanges::indices(window_count);
         let picked = idx.map(|i| windows.get(i));
-        let cfg = self.cfg.clone();
-        let raw = fuzzy_memberships(&sides, &cfg.lo, &cfg.hi, &cfg);
-        match cfg.policy {
+        let raw = fuzzy_memberships(&sides, &self.cfg);
+        let (policy, lo) = (self.cfg.policy, self.cfg.lo);
+        match policy {
             DecisionPolicy::Reference => {
-                let c = reference_decision(&sides, &cfg.lo);
+                let c = reference_decision(&sides, &lo);
                 self.current = c.command;
                 NavDecision {
                     memberships: Memberships {
@@ -555,13 +554,13 @@ impl Navigator {
                 }
             }
             DecisionPolicy::MeanEstimation | DecisionPolicy::ThresholdEstimation => {
-                let proposal = if cfg.policy == DecisionPolicy::MeanEstimation {
+                let proposal = if policy == DecisionPolicy::MeanEstimation {
                     mean_estimation(picked)
                 } else {
-                    threshold_estimation(picked, cfg.lo.front_m)
+                    threshold_estimation(picked, lo.front_m)
                 };
-                let walls = crisp_walls(&sides, &cfg.lo);
-                let command = self.hold(proposal, false);
+                let walls = crisp_walls(&sides, &lo);
+                let command = self.hold(proposal);
                 let (turn_angle_deg, ramp) = reference_turn(&sides, command);
                 NavDecision {
                     memberships: raw,
@@ -582,10 +581,10 @@ impl Navigator {
         }
     }
 
-    /// The command filter: a new command must be proposed `hold_frames` times in a row
-    /// (`urgent` ones act at once).
-    fn hold(&mut self, proposal: MotionCommand, urgent: bool) -> MotionCommand {
-        if proposal == self.current || urgent || self.cfg.hold_frames <= 1 {
+    /// The command filter: a new command must be proposed `hold_frames` times in a row.
+    /// (A blocked front does not go through it: the fuzzy policy turns at once.)
+    fn hold(&mut self, proposal: MotionCommand) -> MotionCommand {
+        if proposal == self.current || self.cfg.hold_frames <= 1 {
             self.current = proposal;
             self.pending = None;
             return proposal;
@@ -626,7 +625,7 @@ impl Navigator {
             front: flip(self.walls.front, m.front),
             right: flip(self.walls.right, m.right),
         };
-        let b = self.threshold(sides, 1).front_m;
+        let b = sides.thresholds(1, &self.cfg).front_m;
         // The front: a wall, or no data right after a near wall (closer than the matcher's
         // shortest range).
         if let Some(r) = sides.middle_m {
@@ -797,7 +796,7 @@ impl Navigator {
             if let Some(turn) = self.axis_correction(pose, near) {
                 return decision(turn.0, turn.1.to_degrees(), 0, intersection);
             }
-            let command = self.hold(proposal, false);
+            let command = self.hold(proposal);
             return decision(command, 0.0, 0, intersection);
         }
         // The front is blocked: the table's options for what the approach showed, the visit
@@ -840,15 +839,6 @@ impl Navigator {
             ramp: 0,
         };
         decision(turn, turn_rad.to_degrees(), 0, intersection)
-    }
-
-    /// Thresholds of the path side `i` (0 left, 1 middle, 2 right) came from.
-    fn threshold(&self, sides: &SideRanges, i: usize) -> WallThresholds {
-        if sides.sources[i] == RangeSource::Hi {
-            self.cfg.hi
-        } else {
-            self.cfg.lo
-        }
     }
 
     /// How far to turn, radians: with `snap_turn_deg` > 0 to the next multiple of it (indoor
@@ -1104,7 +1094,7 @@ mod tests {
 
     fn fuzzy_type(l: f64, m: f64, r: f64) -> IntersectionType {
         let cfg = DecisionConfig::default();
-        let mem = fuzzy_memberships(&feet(l, m, r), &cfg.lo, &cfg.hi, &cfg);
+        let mem = fuzzy_memberships(&feet(l, m, r), &cfg);
         classify(Walls {
             left: mem.left >= 0.5,
             front: mem.front >= 0.5,
