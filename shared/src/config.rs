@@ -141,6 +141,9 @@ pub struct CameraConfig {
     /// Height of the optical centres above the floor, metres (level camera assumed): fusion
     /// uses it to drop floor and ceiling points.
     pub height_m: f64,
+    /// Distance of the optical centres ahead of the robot's turning centre, metres (the
+    /// decision stage's local map places what the camera sees with it).
+    pub forward_m: f64,
 }
 
 impl Default for CameraConfig {
@@ -150,6 +153,7 @@ impl Default for CameraConfig {
             focal_px_320: 320.0,
             baseline_m: 0.060,
             height_m: 0.25,
+            forward_m: 0.20,
         }
     }
 }
@@ -510,6 +514,20 @@ pub struct DecisionConfig {
     pub threshold_rate_pct: f64,
     /// Odometry model for dead reckoning.
     pub odometry: OdometryConfig,
+    /// Build the local occupancy map from the obstacle scans and use it (heading fix from the
+    /// walls, centring, side openings, lining up with a branch, clearance before turning).
+    /// Off by default until it passes every junction test (docs/navigation.md).
+    pub local_map: bool,
+    /// Share of the heading error read from the walls' directions that corrects dead
+    /// reckoning each frame (walls meeting at right angles, `snap_turn_deg = 90`); 0 disables.
+    pub heading_fix_gain: f64,
+    /// Cell size of the local occupancy map built from the obstacle scans, metres.
+    pub local_map_cell_m: f64,
+    /// Seconds after which a local map cell is forgotten (dead reckoning drifts).
+    pub local_map_age_s: f64,
+    /// Keep this far from side walls seen in the local map, metres (lateral, from the robot's
+    /// centre line).
+    pub side_clearance_m: f64,
 }
 
 impl Default for DecisionConfig {
@@ -535,6 +553,11 @@ impl Default for DecisionConfig {
             snap_turn_deg: 90.0,
             threshold_rate_pct: 20.0,
             odometry: OdometryConfig::default(),
+            local_map: false,
+            heading_fix_gain: 0.3,
+            local_map_cell_m: 0.1,
+            local_map_age_s: 20.0,
+            side_clearance_m: 0.4,
         }
     }
 }
@@ -817,6 +840,12 @@ impl HvsConfig {
                 format!("= {} must be in [0, 10) metres", c.height_m),
             ));
         }
+        if !(-2.0..=2.0).contains(&c.forward_m) {
+            return Err(self.invalid(
+                "camera.forward_m",
+                format!("= {} must be in [-2, 2] metres", c.forward_m),
+            ));
+        }
         for (key, cfg, width) in [
             ("stereo.lo", &self.stereo.lo, 320),
             ("stereo.hi", &self.stereo.hi, 640),
@@ -951,6 +980,10 @@ impl HvsConfig {
             ("decision.corridor_factor", d.corridor_factor, 1.0, 4.0),
             ("decision.smoothing", d.smoothing, 0.01, 1.0),
             ("decision.visit_cell_m", d.visit_cell_m, 0.05, 5.0),
+            ("decision.heading_fix_gain", d.heading_fix_gain, 0.0, 1.0),
+            ("decision.local_map_cell_m", d.local_map_cell_m, 0.02, 1.0),
+            ("decision.local_map_age_s", d.local_map_age_s, 0.1, 3600.0),
+            ("decision.side_clearance_m", d.side_clearance_m, 0.0, 5.0),
             ("decision.commit_m", d.commit_m, 0.0, 10.0),
             ("decision.min_turn_deg", d.min_turn_deg, 0.0, 90.0),
             ("decision.snap_turn_deg", d.snap_turn_deg, 0.0, 90.0),

@@ -30,6 +30,8 @@ pub const HI_PIXELS: usize = HI_WIDTH * HI_HEIGHT;
 pub const DISPARITY_SCALE: f32 = 256.0;
 /// Number of range windows a [`RangeReport`] can hold.
 pub const MAX_RANGE_WINDOWS: usize = 5;
+/// Number of column bins of an [`ObstacleScan`] (5 px each at 320x240, 10 at 640x480).
+pub const SCAN_BINS: usize = 64;
 /// Length of the fixed name fields (stage names).
 pub const NAME_LEN: usize = 32;
 /// Maximum number of stages a [`SupervisorStatus`] lists.
@@ -331,7 +333,45 @@ pub struct RangeWindow {
     pub source: u32,
 }
 
-/// Ranges per vertical window for one fast-path frame (176 bytes).
+/// The nearest obstacle in each of [`SCAN_BINS`] equal column bins of the image, left to right:
+/// a laser-scan-like view of the disparity map (floor and ceiling left out) for obstacle
+/// avoidance and the decision stage's local map (264 bytes).
+///
+/// Bin `i` looks along the direction whose tangent (left of the optical axis positive) is
+/// `tan_half_fov * (1 - 2 * (i + 0.5) / SCAN_BINS)`; its `range_m` is the distance along the
+/// optical axis (depth), so the point lies `range_m * tangent` to the left of the axis.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::ObstacleScan")]
+pub struct ObstacleScan {
+    /// `(width / 2) / focal_px` of the image the scan came from.
+    pub tan_half_fov: f32,
+    /// Bins filled from the 640x480 path (the fast path had no data there).
+    pub hi_bins: u32,
+    /// Depth of the bin's nearest obstacle (a low percentile of its points), metres; 0 = no
+    /// data.
+    pub range_m: [f32; SCAN_BINS],
+}
+
+impl Default for ObstacleScan {
+    fn default() -> Self {
+        Self::zeroed()
+    }
+}
+
+impl ObstacleScan {
+    /// Tangent of bin `i`'s viewing direction (left of the optical axis positive).
+    pub fn bin_tangent(&self, i: usize) -> f64 {
+        self.tan_half_fov as f64 * (1.0 - 2.0 * (i as f64 + 0.5) / SCAN_BINS as f64)
+    }
+
+    /// Bins with data.
+    pub fn valid_bins(&self) -> usize {
+        self.range_m.iter().filter(|&&r| r > 0.0).count()
+    }
+}
+
+/// Ranges per vertical window for one fast-path frame, and the obstacle scan (440 bytes).
 #[repr(C)]
 #[derive(Debug, Default, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
 #[type_name("hvs::RangeReport")]
@@ -356,6 +396,8 @@ pub struct RangeReport {
     pub valid_edge_px: u32,
     /// Reserved, zero.
     pub reserved: u32,
+    /// Nearest obstacle per column bin (fast path, gaps filled from a fresh 640x480 result).
+    pub scan: ObstacleScan,
 }
 
 impl Sequenced for RangeReport {
@@ -861,7 +903,8 @@ mod tests {
         assert_eq!(size_of::<DisparityMap320x240>(), 64 + 2 * 76_800);
         assert_eq!(size_of::<DisparityMap640x480>(), 64 + 2 * 307_200);
         assert_eq!(size_of::<RangeWindow>(), 24);
-        assert_eq!(size_of::<RangeReport>(), 176);
+        assert_eq!(size_of::<RangeReport>(), 440);
+        assert_eq!(size_of::<ObstacleScan>(), 264);
         assert_eq!(size_of::<Decision>(), 64);
         assert_eq!(size_of::<ActuatorReport>(), 72);
         assert_eq!(size_of::<StageHeartbeat>(), 184);
@@ -879,6 +922,8 @@ mod tests {
         assert_eq!(offset_of!(StereoFrame320x240, right), 64 + 76_800);
         assert_eq!(offset_of!(DisparityHeader, algorithm), 56);
         assert_eq!(offset_of!(RangeReport, windows), 48);
+        assert_eq!(offset_of!(RangeReport, scan), 176);
+        assert_eq!(offset_of!(ObstacleScan, range_m), 8);
         assert_eq!(offset_of!(Decision, command), 24);
         assert_eq!(offset_of!(ActuatorReport, reason), 40);
         assert_eq!(offset_of!(ActuatorReport, bytes), 56);

@@ -74,18 +74,22 @@ pub fn run(config_path: &std::path::Path, frames: usize) -> Result<()> {
         let mut path = FusionPath::new(&config, w, h, RangeSource::Lo);
         let mut windows = [RangeWindow::default(); MAX_RANGE_WINDOWS];
         row(
-            "fusion (edges+fuse+windows)",
+            "fusion (edges+fuse+windows+scan)",
             time_us(frames, || {
                 windows = path.ranges(&left, &disparity).0;
             }),
         );
-        let mut nav = Navigator::new(&config.decision, &config.actuator.pulses);
+        let scan = *path.scan();
+        // The local map on: the decision's worst case.
+        let mut decision_cfg = config.decision.clone();
+        decision_cfg.local_map = true;
+        let mut nav = Navigator::new(&decision_cfg, &config.actuator.pulses);
         let mut t_ns = 0u64;
         row(
-            "decision (navigator)",
+            "decision (navigator+local map)",
             time_us(frames, || {
                 t_ns += 33_000_000;
-                std::hint::black_box(nav.decide(&windows, f.windows as usize, t_ns));
+                std::hint::black_box(nav.decide(&windows, f.windows as usize, &scan, t_ns));
             }),
         );
     }

@@ -34,6 +34,8 @@ pub struct DriveOptions {
     pub rate_hz: f64,
     /// Override of the visit memory setting.
     pub visit_memory: Option<bool>,
+    /// Local occupancy map on or off (`None`: the config's `decision.local_map`).
+    pub local_map: Option<bool>,
 }
 
 /// The outcome of a drive.
@@ -47,6 +49,8 @@ pub struct DriveReport {
     pub decisions: u64,
     /// Whether the visit memory was on.
     pub visit_memory: bool,
+    /// Whether the local occupancy map was on.
+    pub local_map: bool,
     /// Collisions with walls (sim ground truth).
     pub collisions: u64,
     /// Distinct map cells the robot's centre entered (sim ground truth).
@@ -101,7 +105,11 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport> {
     if let Some(m) = opts.visit_memory {
         decision_cfg.visit_memory = m;
     }
-    let mut nav = Navigator::new(&decision_cfg, &config.actuator.pulses);
+    if let Some(m) = opts.local_map {
+        decision_cfg.local_map = m;
+    }
+    let mut nav = Navigator::new(&decision_cfg, &config.actuator.pulses)
+        .with_camera_forward_m(config.camera.forward_m);
     let mut commander = Commander::new(&config.actuator);
     let psc = world.psc();
 
@@ -130,11 +138,11 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport> {
         let (windows, _, _) = fusion.ranges(&left, &disparity);
         // The decision is made (and published) after the frame's processing time.
         let now = ns(t) + 1;
-        let nd = nav.decide(&windows, config.fusion.windows as usize, now);
+        let nd = nav.decide(&windows, config.fusion.windows as usize, fusion.scan(), now);
         if trace {
             let p = world.pose();
             eprintln!(
-                "t {t:6.2} coll {} pose ({:5.2},{:5.2},{:6.1}) ranges {} mem {:.2}/{:.2}/{:.2} {} {} dr ({:5.2},{:5.2},{:6.1})",
+                "t {t:6.2} coll {} pose ({:5.2},{:5.2},{:6.1}) ranges {} mem {:.2}/{:.2}/{:.2} {} {} dr ({:5.2},{:5.2},{:6.1}) {}",
                 world.collisions(),
                 p.x_m,
                 p.y_m,
@@ -151,7 +159,20 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport> {
                 nd.command.label(),
                 nd.pose.x_m,
                 nd.pose.y_m,
-                nd.pose.heading_rad.to_degrees()
+                nd.pose.heading_rad.to_degrees(),
+                nav.describe()
+            );
+        }
+        if let Some(_at) = std::env::var("HVS_DRIVE_MAP_AT")
+            .ok()
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|&at| (t - at).abs() < 0.5 * dt)
+        {
+            eprintln!(
+                "local map at t {t:.2} (dead-reckoned pose {:.2},{:.2}):\n{}",
+                nd.pose.x_m,
+                nd.pose.y_m,
+                nav.local_map().ascii(nd.pose.x_m, nd.pose.y_m, 2.0, now)
             );
         }
         *intersections
@@ -200,6 +221,7 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport> {
         duration_s: steps as f64 * dt,
         decisions: steps,
         visit_memory: decision_cfg.visit_memory,
+        local_map: decision_cfg.local_map,
         collisions: truth.collisions,
         distinct_cells: cells.len(),
         distance_m: truth.odometer_m,
@@ -225,12 +247,13 @@ pub fn run(config_path: &Path, opts: &DriveOptions, json: bool) -> Result<()> {
         return Ok(());
     }
     println!(
-        "map {}: {:.0} s simulated in {:.1} s, {} decisions, visit memory {}",
+        "map {}: {:.0} s simulated in {:.1} s, {} decisions, visit memory {}, local map {}",
         r.map,
         r.duration_s,
         r.wall_s,
         r.decisions,
-        if r.visit_memory { "on" } else { "off" }
+        if r.visit_memory { "on" } else { "off" },
+        if r.local_map { "on" } else { "off" }
     );
     println!(
         "collisions {}  distinct cells {}  distance {:.1} m  end {:.2} m ahead, {:.2} m left",

@@ -190,6 +190,9 @@ enum SimCommand {
         /// Visit memory on or off (default: the config's decision.visit_memory).
         #[arg(long, value_parser = ["on", "off"])]
         memory: Option<String>,
+        /// Local occupancy map on or off (default: the config's decision.local_map).
+        #[arg(long, value_parser = ["on", "off"])]
+        local_map: Option<String>,
         /// Config file (default: config/sim.toml).
         #[arg(long, value_name = "FILE")]
         config: Option<PathBuf>,
@@ -476,6 +479,7 @@ fn main() -> ExitCode {
                     duration,
                     rate_hz,
                     memory,
+                    local_map,
                     config,
                     json,
                 },
@@ -491,6 +495,7 @@ fn main() -> ExitCode {
                 duration_s: duration,
                 rate_hz,
                 visit_memory: memory.map(|m| m == "on"),
+                local_map: local_map.map(|m| m == "on"),
             };
             drive::run(&config, &opts, json)
         })(),

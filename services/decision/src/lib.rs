@@ -16,13 +16,17 @@
 //! state in which the way ahead is open but a side is undecided (its smoothed membership is
 //! inside the fuzzy band): keep going straight until it resolves.
 
+pub mod local_map;
 pub mod odometry;
 
 use std::collections::HashMap;
 
 use hvs_shared::config::{DecisionConfig, DecisionPolicy, PulseTable, WallThresholds};
-use hvs_shared::messages::{IntersectionType, MotionCommand, RangeSource, RangeWindow};
+use hvs_shared::messages::{
+    IntersectionType, MotionCommand, ObstacleScan, RangeSource, RangeWindow,
+};
 
+pub use local_map::{CellState, LocalMap, RegionCount, wall_direction};
 pub use odometry::{DeadReckonedPose, Odometry};
 
 /// Decision policy codes carried in [`hvs_shared::messages::Decision::policy`].
@@ -415,8 +419,11 @@ enum Maneuver {
     /// Driving ahead after a turn until `until_m` of odometry (no new branch before).
     Commit { until_m: f64 },
     /// Backing up until `until_m` of odometry: the view froze while the wheels turned
-    /// (wedged against a wall).
+    /// (wedged against a wall), a corner is too close to turn, or the opening to turn into
+    /// is behind.
     Backup { until_m: f64 },
+    /// Creeping ahead until `until_m` of odometry, to the middle of the opening to turn into.
+    Creep { until_m: f64 },
 }
 
 /// One decision of the [`Navigator`], with what it was based on.
@@ -452,6 +459,31 @@ const BACKUP_M: f64 = 0.25;
 const CLEARANCE_NEAR_M: f64 = 0.6;
 /// Membership above which a wall appears (and below `1 - ON` it disappears).
 const WALL_ON: f64 = 0.6;
+/// Scan points farther than this do not enter the local map or the heading fix, metres
+/// (depth noise grows with the square of the range).
+const MAP_RANGE_M: f64 = 3.0;
+/// Segments that must agree on the walls' direction for a heading fix.
+const HEADING_FIX_VOTES: usize = 12;
+/// Largest heading error a fix corrects (a larger one is a wrong reading), radians.
+const HEADING_FIX_MAX_RAD: f64 = 0.3;
+/// No heading fix while turning faster than this (the scan is a frame old), rad/s.
+const HEADING_FIX_MAX_TURN_RAD_S: f64 = 0.3;
+/// Half-width of the corridor the robot sweeps: its half-width (0.156 m) plus a margin.
+const SWEEP_HALF_WIDTH_M: f64 = 0.2;
+/// The robot's front edge ahead of its turning centre, metres.
+const FRONT_EDGE_M: f64 = 0.22;
+/// Radius swept by the corners when turning in place (half-diagonal 0.27 m) plus a margin.
+const TURN_RADIUS_M: f64 = 0.3;
+/// Shortest side opening the robot turns into (its width 0.31 m plus margins), metres.
+const OPENING_MIN_M: f64 = 0.6;
+/// The robot turns into an opening when its centre is this close to the opening's middle.
+const LINE_UP_TOLERANCE_M: f64 = 0.1;
+/// Lateral extent of the region that must be free beside the robot for a side opening.
+const OPENING_LATERAL_M: (f64, f64) = (0.35, 1.0);
+
+/// Odometry distance (driving or turning) between two heading corrections, metres.
+const CORRECTION_SPACING_M: f64 = 0.25;
+
 /// Sent while turning: stop this many seconds of turn early (the command takes about this
 /// long to reach the wheels: one decision period plus two PSC commands on a 2400 baud wire).
 const TURN_LEAD_S: f64 = 0.1;
@@ -479,6 +511,17 @@ pub struct Navigator {
     frozen_frames: u32,
     /// Frames in a row with no range in any window.
     blind_frames: u32,
+    /// What the obstacle scans showed around the robot.
+    map: LocalMap,
+    /// The camera's distance ahead of the turning centre, metres.
+    camera_forward_m: f64,
+    /// Time of the decision being made.
+    now_ns: u64,
+    /// Odometry distance before which no new heading correction starts (each one must be
+    /// followed by some driving, or the quantised turns dither in place).
+    next_correction_m: f64,
+    /// Backed off a corner before the turn about to start.
+    backed_off: bool,
 }
 
 impl Navigator {
@@ -503,7 +546,45 @@ impl Navigator {
             last_view: [None; 3],
             frozen_frames: 0,
             blind_frames: 0,
+            map: LocalMap::new(cfg.local_map_cell_m, cfg.local_map_age_s),
+            camera_forward_m: 0.2,
+            now_ns: 0,
+            next_correction_m: 0.0,
+            backed_off: false,
         }
+    }
+
+    /// Sets where the camera sits: `forward_m` ahead of the turning centre (default 0.2 m).
+    pub fn with_camera_forward_m(mut self, forward_m: f64) -> Self {
+        self.camera_forward_m = forward_m;
+        self
+    }
+
+    /// The local occupancy map.
+    pub fn local_map(&self) -> &LocalMap {
+        &self.map
+    }
+
+    /// A one-line account of the navigator's state, for traces: the maneuver, the openings
+    /// the local map shows beside the robot (offset along its way, m) and the side walls'
+    /// distances.
+    pub fn describe(&self) -> String {
+        let pose = self.odometry.pose();
+        let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+        format!(
+            "{:?} open L {} R {} seen {}{} wall L {} R {}",
+            self.maneuver,
+            fmt(self.opening_offset(&pose, true)),
+            fmt(self.opening_offset(&pose, false)),
+            u8::from(self.side_seen(&pose, true)),
+            u8::from(self.side_seen(&pose, false)),
+            fmt(self
+                .map
+                .side_distance(&pose, true, (-0.2, 0.3), 0.9, self.now_ns)),
+            fmt(self
+                .map
+                .side_distance(&pose, false, (-0.2, 0.3), 0.9, self.now_ns)),
+        )
     }
 
     /// The actuator put a command on the wire (feeds dead reckoning).
@@ -521,15 +602,38 @@ impl Navigator {
         self.odometry.pose()
     }
 
-    /// Decides from one range report's windows at `now_ns`.
+    /// Decides from one range report's windows and obstacle scan at `now_ns` (a scan with no
+    /// data leaves the local map as it is).
     pub fn decide(
         &mut self,
         windows: &[RangeWindow],
         window_count: usize,
+        scan: &ObstacleScan,
         now_ns: u64,
     ) -> NavDecision {
         self.odometry.advance_to(now_ns);
+        self.now_ns = now_ns;
+        if self.cfg.local_map
+            && self.cfg.heading_fix_gain > 0.0
+            && self.cfg.snap_turn_deg == 90.0
+            && self.odometry.turn_rate_rad_s().abs() < HEADING_FIX_MAX_TURN_RAD_S
+            && let Some(a) = wall_direction(scan, MAP_RANGE_M, HEADING_FIX_VOTES)
+        {
+            // The walls run at a (mod 90 degrees) in the robot's frame: the heading is -a
+            // (mod 90 degrees) on the building's axes.
+            let q = std::f64::consts::FRAC_PI_2;
+            let heading = self.odometry.pose().heading_rad;
+            let error = (-a - heading + 0.5 * q).rem_euclid(q) - 0.5 * q;
+            if error.abs() < HEADING_FIX_MAX_RAD {
+                self.odometry
+                    .correct_heading(self.cfg.heading_fix_gain * error);
+            }
+        }
         let pose = self.odometry.pose();
+        if self.cfg.local_map && scan.valid_bins() > 0 {
+            self.map
+                .insert_scan(&pose, self.camera_forward_m, scan, MAP_RANGE_M, now_ns);
+        }
         self.grid.record(pose.x_m, pose.y_m);
         let sides = SideRanges::from_windows(windows, window_count);
         let idx = SideRanges::indices(window_count);
@@ -631,7 +735,21 @@ impl Navigator {
         if let Some(r) = sides.middle_m {
             self.front_was_near = r < 2.0 * b;
         }
-        let front_blocked = self.walls.front || (sides.middle_m.is_none() && self.front_was_near);
+        // The local map: something in the robot's path within 0.25 m of its front edge
+        // (a corner approached at an angle, a wall the windows average away).
+        let now = self.now_ns;
+        let path_blocked = self
+            .map
+            .count_region(
+                &pose,
+                (FRONT_EDGE_M, FRONT_EDGE_M + 0.25),
+                (-SWEEP_HALF_WIDTH_M, SWEEP_HALF_WIDTH_M),
+                now,
+            )
+            .occupied
+            >= 2;
+        let front_blocked =
+            self.walls.front || path_blocked || (sides.middle_m.is_none() && self.front_was_near);
         // What the sides looked like on the approach (front between 1.4 b and 3.5 b): when the
         // front wall is reached, the side windows see nothing but that wall.
         // A side wall there converges on the front wall (its window's range is clearly shorter
@@ -657,11 +775,13 @@ impl Navigator {
         let mut intersection = if no_data && !front_blocked {
             IntersectionType::Unknown
         } else if front_blocked {
+            // What the side windows showed on the approach; a side the local map shows
+            // open is open (the windows see a side opening only obliquely, from afar).
             let view = self.approach.unwrap_or(m);
             classify(Walls {
-                left: view.left >= 0.5,
+                left: view.left >= 0.5 && self.opening_offset(&pose, true).is_none(),
                 front: true,
-                right: view.right >= 0.5,
+                right: view.right >= 0.5 && self.opening_offset(&pose, false).is_none(),
             })
         } else {
             classify(self.walls)
@@ -686,8 +806,7 @@ impl Navigator {
             _ => false,
         });
         self.last_view = view;
-        let moving = !matches!(self.current, MotionCommand::Stop)
-            && !matches!(self.maneuver, Maneuver::Backup { .. });
+        let moving = !matches!(self.current, MotionCommand::Stop);
         self.frozen_frames = if same && moving {
             self.frozen_frames + 1
         } else {
@@ -696,8 +815,16 @@ impl Navigator {
         if self.frozen_frames >= STUCK_FRAMES {
             self.frozen_frames = 0;
             self.attempts = 0;
-            self.maneuver = Maneuver::Backup {
-                until_m: self.odometry.distance_m() + BACKUP_M,
+            // Wedged: back away; if backing up is what is stuck (a corner behind), pull
+            // forward instead.
+            self.maneuver = if matches!(self.maneuver, Maneuver::Backup { .. }) {
+                Maneuver::Creep {
+                    until_m: self.odometry.distance_m() + BACKUP_M,
+                }
+            } else {
+                Maneuver::Backup {
+                    until_m: self.odometry.distance_m() + BACKUP_M,
+                }
             };
         }
         // A maneuver in progress.
@@ -755,6 +882,24 @@ impl Navigator {
                 self.current = next;
                 return decision(next, target.to_degrees(), 0, intersection);
             }
+            Maneuver::Creep { until_m } => {
+                let clear = self
+                    .map
+                    .count_region(
+                        &pose,
+                        (FRONT_EDGE_M, FRONT_EDGE_M + 0.1),
+                        (-SWEEP_HALF_WIDTH_M, SWEEP_HALF_WIDTH_M),
+                        now,
+                    )
+                    .occupied
+                    == 0;
+                if self.odometry.distance_m() < until_m && clear {
+                    self.current = MotionCommand::Forward;
+                    return decision(MotionCommand::Forward, 0.0, 0, intersection);
+                }
+                self.maneuver = Maneuver::Cruise;
+                self.current = MotionCommand::Stop;
+            }
             Maneuver::Commit { until_m } => {
                 if self.odometry.distance_m() < until_m && !front_blocked {
                     if let Some(turn) = self.axis_correction(pose, [None; 3]) {
@@ -793,6 +938,25 @@ impl Navigator {
                 self.blind_frames = 0;
                 MotionCommand::Forward
             };
+            // With the visit memory: a side opening beside the robot whose way is less
+            // visited than the way ahead is taken (the local map saw it on the approach).
+            if self.cfg.visit_memory
+                && self.cfg.snap_turn_deg > 0.0
+                && intersection != IntersectionType::Unknown
+                && let Some(command) = self.side_branch(&pose)
+            {
+                let target = self.turn_target(pose, command, 90.0);
+                self.maneuver = Maneuver::Turning {
+                    command,
+                    start_heading: pose.heading_rad,
+                    target_rad: target,
+                    ramp: 0,
+                };
+                self.current = command;
+                self.pending = None;
+                self.attempts = 0;
+                return decision(command, target.to_degrees(), 0, intersection);
+            }
             if let Some(turn) = self.axis_correction(pose, near) {
                 return decision(turn.0, turn.1.to_degrees(), 0, intersection);
             }
@@ -819,6 +983,62 @@ impl Navigator {
                 })
                 .unwrap_or(first),
         };
+        // A corner inside the circle the robot sweeps when turning in place: back off first
+        // (once per turn: the way back may be blocked too).
+        if !self.backed_off
+            && self
+                .map
+                .count_region(
+                    &pose,
+                    (0.0, TURN_RADIUS_M),
+                    (-TURN_RADIUS_M, TURN_RADIUS_M),
+                    now,
+                )
+                .occupied
+                > 0
+        {
+            self.backed_off = true;
+            self.maneuver = Maneuver::Backup {
+                until_m: self.odometry.distance_m() + 0.1,
+            };
+            self.current = MotionCommand::Reverse;
+            return decision(MotionCommand::Reverse, 0.0, 0, intersection);
+        }
+        // Line up with the middle of the opening before turning into it (the front wall
+        // stops the robot about 1 m short of it; a corner opening starts beside the robot).
+        let side = match command {
+            MotionCommand::Left => Some(true),
+            MotionCommand::Right => Some(false),
+            _ => None,
+        };
+        if let Some(left) = side
+            && let Some(offset) = self.opening_offset(&pose, left)
+        {
+            let path_clear = self
+                .map
+                .count_region(
+                    &pose,
+                    (FRONT_EDGE_M, FRONT_EDGE_M + offset + 0.12),
+                    (-SWEEP_HALF_WIDTH_M, SWEEP_HALF_WIDTH_M),
+                    now,
+                )
+                .occupied
+                == 0;
+            if offset > LINE_UP_TOLERANCE_M && path_clear {
+                self.maneuver = Maneuver::Creep {
+                    until_m: self.odometry.distance_m() + offset,
+                };
+                self.current = MotionCommand::Forward;
+                return decision(MotionCommand::Forward, 0.0, 0, intersection);
+            }
+            if offset < -LINE_UP_TOLERANCE_M {
+                self.maneuver = Maneuver::Backup {
+                    until_m: self.odometry.distance_m() - offset,
+                };
+                self.current = MotionCommand::Reverse;
+                return decision(MotionCommand::Reverse, 0.0, 0, intersection);
+            }
+        }
         let (angle, ramp) = reference_turn(sides, command);
         let (turn, turn_rad) = match command {
             // Dead end: turn around in place rather than back up blind.
@@ -832,6 +1052,7 @@ impl Navigator {
         // angle) open loop; here dead reckoning ends the turn, and a ramp would only let the
         // robot roll on into the junction while the pulses slew.
         let _ = ramp;
+        self.backed_off = false;
         self.maneuver = Maneuver::Turning {
             command: turn,
             start_heading: pose.heading_rad,
@@ -867,6 +1088,79 @@ impl Navigator {
         }
     }
 
+    /// Whether a column of the region beside the robot, `ahead_m` along its way, is free:
+    /// no wall, and at least 70 % of it seen free.
+    fn column_free(&self, pose: &DeadReckonedPose, left: bool, ahead_m: f64) -> bool {
+        let sign = if left { 1.0 } else { -1.0 };
+        let (a, b) = (sign * OPENING_LATERAL_M.0, sign * OPENING_LATERAL_M.1);
+        let n = self
+            .map
+            .count_region(pose, (ahead_m, ahead_m), (a.min(b), a.max(b)), self.now_ns);
+        n.occupied == 0 && n.free * 10 >= (n.free + n.occupied + n.unknown) * 7
+    }
+
+    /// Whether the local map saw the region beside the robot (from 0.4 m behind to 1 m ahead)
+    /// well enough to say where it is open: at most half of it unknown.
+    fn side_seen(&self, pose: &DeadReckonedPose, left: bool) -> bool {
+        let sign = if left { 1.0 } else { -1.0 };
+        let (a, b) = (sign * OPENING_LATERAL_M.0, sign * OPENING_LATERAL_M.1);
+        let n = self
+            .map
+            .count_region(pose, (-0.4, 1.0), (a.min(b), a.max(b)), self.now_ns);
+        n.unknown * 2 <= n.free + n.occupied + n.unknown
+    }
+
+    /// The middle of the first side opening at least `OPENING_MIN_M` long beside the robot,
+    /// from 0.4 m behind its centre to 1.5 m ahead, as a distance along its way (negative:
+    /// behind).
+    fn opening_offset(&self, pose: &DeadReckonedPose, left: bool) -> Option<f64> {
+        const STEP: f64 = 0.05;
+        let mut start: Option<f64> = None;
+        const LAST: usize = 38; // 0.4 m behind to 1.5 m ahead
+        for k in 0..=LAST {
+            let o = -0.4 + k as f64 * STEP;
+            let free = self.column_free(pose, left, o);
+            if free {
+                start.get_or_insert(o);
+            }
+            if let Some(s) = start {
+                let end = if free { o } else { o - STEP };
+                if (!free || k == LAST) && end - s + STEP >= OPENING_MIN_M {
+                    return Some(0.5 * (s + end));
+                }
+                if !free {
+                    start = None;
+                }
+            }
+        }
+        None
+    }
+
+    /// A side opening beside the robot (left or right) whose way is less visited than the
+    /// way ahead, if any: the local map must show the region beside the robot free for
+    /// `OPENING_HALF_M` either side of its centre, with no wall in it.
+    fn side_branch(&self, pose: &DeadReckonedPose) -> Option<MotionCommand> {
+        let ahead = self.grid.score(pose.x_m, pose.y_m, pose.heading_rad);
+        let mut best: Option<(MotionCommand, u32)> = None;
+        for (command, left) in [(MotionCommand::Left, true), (MotionCommand::Right, false)] {
+            if !self
+                .opening_offset(pose, left)
+                .is_some_and(|o| o.abs() <= LINE_UP_TOLERANCE_M)
+            {
+                continue;
+            }
+            let score = self.grid.score(
+                pose.x_m,
+                pose.y_m,
+                pose.heading_rad + branch_heading(command),
+            );
+            if score < ahead && best.is_none_or(|(_, s)| score < s) {
+                best = Some((command, score));
+            }
+        }
+        best.map(|(c, _)| c)
+    }
+
     /// A short turn onto the wanted heading when the dead-reckoned heading is more than 6
     /// degrees off it: the nearest hallway axis (a multiple of `snap_turn_deg`), bent by 12
     /// degrees away from a side wall that is too close. Without the bend a robot that left a
@@ -887,16 +1181,37 @@ impl Navigator {
         // the axis at f = 320 px). Balancing the two sides was tried and made the robot dither:
         // the side windows' nearest edge points are too sparse for a fine lateral estimate.
         let max_bend = 12f64.to_radians();
+        // The local map gives the side walls' lateral distances: centre between two walls,
+        // keep `side_clearance_m` from one (12 degrees of bend per 0.15 m off).
+        let per_m = max_bend / 0.15;
+        let look = |left| {
+            self.map
+                .side_distance(&pose, left, (-0.2, 0.3), 0.9, self.now_ns)
+        };
+        let clearance = self.cfg.side_clearance_m;
         let close = |v: Option<f64>| v.is_some_and(|v| v < CLEARANCE_NEAR_M);
-        let bend = match (close(near[0]), close(near[2])) {
-            (false, true) => max_bend,
-            (true, false) => -max_bend,
-            _ => 0.0,
+        // How far the robot is off where it should be (positive: too far right), ignoring
+        // less than 0.08 m (the map's cells are 0.1 m).
+        let off = match (look(true), look(false)) {
+            (Some(l), Some(r)) => Some(0.5 * (l - r)),
+            (Some(l), None) => Some(-(clearance - l).max(0.0)),
+            (None, Some(r)) => Some((clearance - r).max(0.0)),
+            (None, None) => None,
+        };
+        let bend = match off {
+            Some(off) if off.abs() < 0.08 => 0.0,
+            Some(off) => (off * per_m).clamp(-max_bend, max_bend),
+            None => match (close(near[0]), close(near[2])) {
+                (false, true) => max_bend,
+                (true, false) => -max_bend,
+                _ => 0.0,
+            },
         };
         let error = pose.heading_rad - (axis + bend);
-        if error.abs() < 6f64.to_radians() {
+        if error.abs() < 6f64.to_radians() || self.odometry.distance_m() < self.next_correction_m {
             return None;
         }
+        self.next_correction_m = self.odometry.distance_m() + CORRECTION_SPACING_M;
         let command = if error > 0.0 {
             MotionCommand::Right
         } else {
@@ -1180,7 +1495,7 @@ mod tests {
         let mut t = 0u64;
         let mut step = |w: &[RangeWindow; 3], nav: &mut Navigator| {
             t += 33_000_000;
-            nav.decide(w, 3, t)
+            nav.decide(w, 3, &ObstacleScan::default(), t)
         };
         // From standstill, Forward comes after `hold_frames` frames.
         let first: Vec<MotionCommand> = (0..3).map(|_| step(&hallway, &mut nav).command).collect();
@@ -1216,7 +1531,7 @@ mod tests {
             window(2.206 * ft, 200),
             window(2.458 * ft, 200),
         ];
-        let d = nav.decide(&glitch, 3, 1);
+        let d = nav.decide(&glitch, 3, &ObstacleScan::default(), 1);
         assert_eq!(
             (d.intersection, d.command),
             (IntersectionType::TBottom, MotionCommand::Left)
@@ -1251,7 +1566,12 @@ mod tests {
             let mut ramps = Vec::new();
             for i in 0..200 {
                 t += 33_000_000;
-                let d = nav.decide(if i == 0 { &left_turn } else { &hallway }, 3, t);
+                let d = nav.decide(
+                    if i == 0 { &left_turn } else { &hallway },
+                    3,
+                    &ObstacleScan::default(),
+                    t,
+                );
                 ramps.push(d.ramp);
                 // The actuator sends every command at once.
                 let pulses = match d.command {

@@ -18,7 +18,8 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let sent = rt.node.subscriber(&topics::ACTUATOR_SENT, 16)?;
     let mut decisions = rt.node.publisher(&topics::DECISIONS)?;
     let cfg = rt.config.decision.clone();
-    let mut nav = Navigator::new(&cfg, &rt.config.actuator.pulses);
+    let mut nav = Navigator::new(&cfg, &rt.config.actuator.pulses)
+        .with_camera_forward_m(rt.config.camera.forward_m);
     let policy = Policy::of(cfg.policy);
     tracing::info!(
         "{}: {:?} policy, side wall < {:.3} m, front wall < {:.3} m (640x480: {:.3} / {:.3} m), visit memory {}",
@@ -50,7 +51,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             rt.count_in(1);
             rt.set_drops(ranges.dropped());
             let r = report.payload();
-            let d = nav.decide(&r.windows, r.window_count as usize, received_ns);
+            let d = nav.decide(&r.windows, r.window_count as usize, &r.scan, received_ns);
             let decision = Decision {
                 frame_id: r.frame_id,
                 capture_ns: r.capture_ns,

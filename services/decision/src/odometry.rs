@@ -156,6 +156,11 @@ impl Odometry {
         self.pose
     }
 
+    /// Turns the heading estimate by `delta_rad` (a fix from the walls' directions).
+    pub fn correct_heading(&mut self, delta_rad: f64) {
+        self.pose.heading_rad += delta_rad;
+    }
+
     /// Distance driven (forwards or backwards), metres.
     pub fn distance_m(&self) -> f64 {
         self.distance_m

@@ -4,7 +4,9 @@
 pub mod canny;
 
 use hvs_shared::config::RangeStatistic;
-use hvs_shared::messages::{DISPARITY_SCALE, MAX_RANGE_WINDOWS, RangeSource, RangeWindow};
+use hvs_shared::messages::{
+    DISPARITY_SCALE, MAX_RANGE_WINDOWS, ObstacleScan, RangeSource, RangeWindow, SCAN_BINS,
+};
 
 pub use canny::{Canny, EDGE, sobel_edges};
 
@@ -170,12 +172,110 @@ impl WindowRanger {
     }
 }
 
+/// Percentile of a scan bin's depths reported as its nearest obstacle: low enough to see a
+/// thin obstacle, high enough that a few mismatched pixels do not raise a phantom.
+pub const SCAN_PERCENTILE: f64 = 15.0;
+/// Fewest points (after the height filter) a scan bin needs to report a range.
+pub const SCAN_MIN_POINTS: usize = 6;
+
+/// The obstacle scan of a disparity map: per column bin, a low percentile of the depths of
+/// the points between the floor and ceiling limits. It uses the dense map, not the fused
+/// (edge-only) one: the local map wants every bin filled, and the matcher's own texture and
+/// uniqueness checks already removed the unreliable pixels.
+#[derive(Debug, Default)]
+pub struct ObstacleScanner {
+    depths: Vec<Vec<f32>>,
+}
+
+impl ObstacleScanner {
+    /// Creates a scanner.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The scan of a disparity map of `width` columns (1/256 px, 0 = no data), with the
+    /// height filter of `p`.
+    pub fn compute(&mut self, disparity_q8: &[u16], width: usize, p: &RangeParams) -> ObstacleScan {
+        self.depths.resize_with(SCAN_BINS, Vec::new);
+        self.depths.iter_mut().for_each(Vec::clear);
+        let mut scan = ObstacleScan {
+            tan_half_fov: (width as f64 / 2.0 / p.depth.focal_px) as f32,
+            ..ObstacleScan::default()
+        };
+        if width == 0 {
+            return scan;
+        }
+        let height = disparity_q8.len() / width;
+        let cy = (height as f64 - 1.0) / 2.0;
+        let b = p.depth.baseline_m;
+        let fb = p.depth.focal_px * b;
+        for (v, row) in disparity_q8.chunks_exact(width).enumerate() {
+            let dv = v as f64 - cy;
+            // Height = h - dv * b / d: within [min, max] is a range of d for the whole row.
+            let mut d_lo = 0.0f64;
+            if dv > 0.0 && p.min_height_m > 0.0 {
+                // Below the camera: height >= min  <=>  d >= dv * b / (h - min).
+                let room = p.camera_height_m - p.min_height_m;
+                if room <= 0.0 {
+                    continue;
+                }
+                d_lo = dv * b / room;
+            } else if dv < 0.0 && p.max_height_m > 0.0 {
+                // Above: height <= max  <=>  d >= -dv * b / (max - h).
+                let room = p.max_height_m - p.camera_height_m;
+                if room <= 0.0 {
+                    continue;
+                }
+                d_lo = -dv * b / room;
+            }
+            let lo_q8 = (d_lo * DISPARITY_SCALE as f64).ceil().max(1.0);
+            if lo_q8 > u16::MAX as f64 {
+                continue;
+            }
+            let lo_q8 = lo_q8 as u16;
+            for (x, &d) in row.iter().enumerate() {
+                if d >= lo_q8 {
+                    let bin = x * SCAN_BINS / width;
+                    self.depths[bin].push((fb * DISPARITY_SCALE as f64 / d as f64) as f32);
+                }
+            }
+        }
+        for (slot, depths) in scan.range_m.iter_mut().zip(self.depths.iter_mut()) {
+            if depths.len() < SCAN_MIN_POINTS {
+                continue;
+            }
+            let k = ((depths.len() - 1) as f64 * SCAN_PERCENTILE / 100.0).round() as usize;
+            let (_, v, _) = depths.select_nth_unstable_by(k, f32::total_cmp);
+            *slot = *v;
+        }
+        scan
+    }
+}
+
+/// Fills the bins of the fast path's scan that have no data from a fresh long-range scan of
+/// the same field of view (it sees farther: the fast path's disparity range ends at about
+/// 2-10 m depending on `min_disp`).
+pub fn merge_scans(lo: &ObstacleScan, hi: Option<&ObstacleScan>) -> ObstacleScan {
+    let mut out = *lo;
+    if let Some(hi) = hi {
+        for (o, &h) in out.range_m.iter_mut().zip(&hi.range_m) {
+            if *o <= 0.0 && h > 0.0 {
+                *o = h;
+                out.hi_bins += 1;
+            }
+        }
+    }
+    out
+}
+
 /// Edges, fused map and window ranges of one resolution, with its buffers: what the fusion
 /// stage runs for every frame of a path.
 #[derive(Debug)]
 pub struct FusionPath {
     canny: Canny,
     ranger: WindowRanger,
+    scanner: ObstacleScanner,
+    scan: ObstacleScan,
     edges: Vec<u8>,
     fused: Vec<u16>,
     width: usize,
@@ -199,6 +299,8 @@ impl FusionPath {
         Self {
             canny: Canny::new(),
             ranger: WindowRanger::new(),
+            scanner: ObstacleScanner::new(),
+            scan: ObstacleScan::default(),
             edges: vec![0; width * height],
             fused: vec![0; width * height],
             width,
@@ -232,7 +334,13 @@ impl FusionPath {
         let windows = self
             .ranger
             .compute(&self.fused, w, &self.params, self.source);
+        self.scan = self.scanner.compute(disparity_q8, w, &self.params);
         (windows, edge_px, valid)
+    }
+
+    /// The obstacle scan of the last frame (dense disparity, height-filtered).
+    pub fn scan(&self) -> &ObstacleScan {
+        &self.scan
     }
 
     /// The edge map of the last frame (`EDGE` = edge).
@@ -305,6 +413,53 @@ mod tests {
             let ft = reference.range_m(d) / hvs_shared::config::M_PER_FT;
             assert!((ft - 380.0 * 0.1982 / d).abs() < 1e-3, "d {d}: {ft} ft");
         }
+    }
+
+    #[test]
+    fn the_scan_sees_a_wall_per_column_and_leaves_out_the_floor() {
+        // 64 columns (one per bin), 40 rows: a wall 1 m away in the left half, 2 m in the
+        // right half, on every row above the middle; the rows below carry floor disparities
+        // (a level camera 0.25 m up sees the floor at row offset dv with d = dv * b / h).
+        let (w, h) = (64usize, 40usize);
+        let mut disp = vec![0u16; w * h];
+        let cy = (h as f64 - 1.0) / 2.0;
+        for v in 0..h {
+            for x in 0..w {
+                let dv = v as f64 - cy;
+                let d_px = if dv < 0.0 {
+                    if x < 32 { 19.2 } else { 9.6 }
+                } else {
+                    dv * 0.06 / 0.25
+                };
+                disp[v * w + x] = (d_px * 256.0).round() as u16;
+            }
+        }
+        let mut p = params(3, RangeStatistic::Median);
+        p.min_height_m = 0.05;
+        let scan = ObstacleScanner::new().compute(&disp, w, &p);
+        assert!((scan.tan_half_fov - 32.0 / 320.0).abs() < 1e-6);
+        for (i, &r) in scan.range_m.iter().enumerate() {
+            let want = if i < 32 { 1.0 } else { 2.0 };
+            assert!((r - want).abs() < 0.01, "bin {i}: {r} m, want {want} m");
+        }
+        // The floor alone is no obstacle; without the height filter it would be.
+        let mut floor_only = disp.clone();
+        floor_only[..w * h / 2].fill(0);
+        assert_eq!(
+            ObstacleScanner::new()
+                .compute(&floor_only, w, &p)
+                .valid_bins(),
+            0
+        );
+        p.min_height_m = 0.0;
+        let floor = ObstacleScanner::new().compute(&floor_only, w, &p);
+        assert_eq!(floor.valid_bins(), SCAN_BINS);
+        // Too few points: no range; a long-range scan fills the gap and is counted.
+        let empty = ObstacleScanner::new().compute(&vec![0u16; w * h], w, &p);
+        assert_eq!(empty.valid_bins(), 0);
+        let merged = merge_scans(&empty, Some(&scan));
+        assert_eq!((merged.valid_bins(), merged.hi_bins), (64, 64));
+        assert_eq!(merge_scans(&scan, Some(&empty)), scan);
     }
 
     #[test]

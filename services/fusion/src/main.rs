@@ -6,12 +6,12 @@
 use std::collections::VecDeque;
 use std::process::ExitCode;
 
-use hvs_fusion::{FusionPath, merge_windows};
+use hvs_fusion::{FusionPath, merge_scans, merge_windows};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::ipc::{ReceivedSample, TopicSubscriber};
 use hvs_shared::messages::{
-    MAX_RANGE_WINDOWS, RangeReport, RangeSource, RangeWindow, Sequenced, StereoFrame320x240,
-    StereoFrame640x480,
+    MAX_RANGE_WINDOWS, ObstacleScan, RangeReport, RangeSource, RangeWindow, Sequenced,
+    StereoFrame320x240, StereoFrame640x480,
 };
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
@@ -28,6 +28,7 @@ struct HiRanges {
     frame_id: u64,
     capture_ns: u64,
     windows: [RangeWindow; MAX_RANGE_WINDOWS],
+    scan: ObstacleScan,
 }
 
 /// Moves every queued frame into `held`, keeping the newest `HELD_FRAMES`.
@@ -89,6 +90,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                             frame_id: m.header.frame_id,
                             capture_ns: m.header.capture_ns,
                             windows,
+                            scan: *hi_path.scan(),
                         });
                     }
                     None => unpaired += 1,
@@ -133,6 +135,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     windows: merge_windows(&lo_windows, hi.map(|h| &h.windows), min_valid_px),
                     valid_edge_px,
                     reserved: 0,
+                    scan: merge_scans(lo_path.scan(), hi.map(|h| &h.scan)),
                 };
                 rt.send_or_report(&mut ranges, sample, monotonic_ns() - received_ns);
             }

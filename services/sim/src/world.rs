@@ -51,6 +51,7 @@ impl SimConfig {
     pub fn from_hvs(config: &hvs_shared::config::HvsConfig, width: usize, height: usize) -> Self {
         let mut rig = StereoRig::new(width, height, config.camera.focal_px(width));
         rig.baseline_m = config.camera.baseline_m;
+        rig.camera_forward_m = config.camera.forward_m;
         let d = &config.sim.defects;
         SimConfig {
             rig,
