@@ -346,6 +346,16 @@ impl VisitGrid {
     }
 }
 
+/// The lateral band (metres left of the robot's centre line, low to high) where a side
+/// opening must be free: `OPENING_LATERAL_M` on the left, mirrored on the right.
+fn side_band(left: bool) -> (f64, f64) {
+    if left {
+        OPENING_LATERAL_M
+    } else {
+        (-OPENING_LATERAL_M.1, -OPENING_LATERAL_M.0)
+    }
+}
+
 /// Heading change of a command's branch, radians (left = +90 degrees).
 fn branch_heading(command: MotionCommand) -> f64 {
     use std::f64::consts::{FRAC_PI_2, PI};
@@ -1091,22 +1101,18 @@ impl Navigator {
     /// Whether a column of the region beside the robot, `ahead_m` along its way, is free:
     /// no wall, and at least 70 % of it seen free.
     fn column_free(&self, pose: &DeadReckonedPose, left: bool, ahead_m: f64) -> bool {
-        let sign = if left { 1.0 } else { -1.0 };
-        let (a, b) = (sign * OPENING_LATERAL_M.0, sign * OPENING_LATERAL_M.1);
         let n = self
             .map
-            .count_region(pose, (ahead_m, ahead_m), (a.min(b), a.max(b)), self.now_ns);
+            .count_region(pose, (ahead_m, ahead_m), side_band(left), self.now_ns);
         n.occupied == 0 && n.free * 10 >= (n.free + n.occupied + n.unknown) * 7
     }
 
     /// Whether the local map saw the region beside the robot (from 0.4 m behind to 1 m ahead)
     /// well enough to say where it is open: at most half of it unknown.
     fn side_seen(&self, pose: &DeadReckonedPose, left: bool) -> bool {
-        let sign = if left { 1.0 } else { -1.0 };
-        let (a, b) = (sign * OPENING_LATERAL_M.0, sign * OPENING_LATERAL_M.1);
         let n = self
             .map
-            .count_region(pose, (-0.4, 1.0), (a.min(b), a.max(b)), self.now_ns);
+            .count_region(pose, (-0.4, 1.0), side_band(left), self.now_ns);
         n.unknown * 2 <= n.free + n.occupied + n.unknown
     }
 

@@ -94,10 +94,16 @@ impl LocalMap {
         (key.0.rem_euclid(SIDE as i32) as usize) * SIDE + key.1.rem_euclid(SIDE as i32) as usize
     }
 
+    /// Whether a cell holds `key` and was updated within the age limit.
+    fn is_live(&self, cell: &Cell, key: (i32, i32), now_ns: u64) -> bool {
+        cell.key == key && now_ns.saturating_sub(cell.stamp_ns) <= self.max_age_ns
+    }
+
     fn update(&mut self, key: (i32, i32), delta: f32, now_ns: u64) {
-        let max_age = self.max_age_ns;
-        let cell = &mut self.cells[Self::slot(key)];
-        if cell.key != key || now_ns.saturating_sub(cell.stamp_ns) > max_age {
+        let slot = Self::slot(key);
+        let live = self.is_live(&self.cells[slot], key, now_ns);
+        let cell = &mut self.cells[slot];
+        if !live {
             *cell = Cell {
                 key,
                 log_odds: 0.0,
@@ -108,24 +114,22 @@ impl LocalMap {
         cell.stamp_ns = now_ns;
     }
 
+    /// A cell's log-odds; 0 (undecided) when it is not live.
     fn log_odds(&self, key: (i32, i32), now_ns: u64) -> f32 {
         let cell = &self.cells[Self::slot(key)];
-        if cell.key != key || now_ns.saturating_sub(cell.stamp_ns) > self.max_age_ns {
-            0.0
-        } else {
+        if self.is_live(cell, key, now_ns) {
             cell.log_odds
+        } else {
+            0.0
         }
     }
 
     /// The state of the cell containing a point of the map frame.
     pub fn state(&self, x_m: f64, y_m: f64, now_ns: u64) -> CellState {
-        let key = self.key(x_m, y_m);
-        let cell = &self.cells[Self::slot(key)];
-        if cell.key != key || now_ns.saturating_sub(cell.stamp_ns) > self.max_age_ns {
-            CellState::Unknown
-        } else if cell.log_odds > DECIDED {
+        let log_odds = self.log_odds(self.key(x_m, y_m), now_ns);
+        if log_odds > DECIDED {
             CellState::Occupied
-        } else if cell.log_odds < -DECIDED {
+        } else if log_odds < -DECIDED {
             CellState::Free
         } else {
             CellState::Unknown
