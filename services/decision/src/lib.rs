@@ -328,8 +328,12 @@ impl VisitGrid {
         self.visits.get(&self.cell(x_m, y_m)).copied().unwrap_or(0)
     }
 
-    /// How visited the way along `heading_rad` from a position looks: the visits of the cells
-    /// 1, 2 and 3 cells away, nearest weighted most.
+    /// How visited the way along `heading_rad` from a position looks: the visits (each cell
+    /// counted at most 3 times) in a swath three cells wide from 1 to `SCORE_REACH_CELLS`
+    /// cells away, the nearest 3 cells weighted double. A long reach is what breaks loops:
+    /// the way round a block the robot has already driven looks visited from its start,
+    /// whereas the first cells of every branch at a junction the robot just crossed are
+    /// usually all visited (the robot swept the junction while turning).
     pub fn score(&self, x_m: f64, y_m: f64, heading_rad: f64) -> u32 {
         (1..=3)
             .map(|k| {
@@ -475,7 +479,7 @@ const MAP_RANGE_M: f64 = 3.0;
 /// Segments that must agree on the walls' direction for a heading fix.
 const HEADING_FIX_VOTES: usize = 12;
 /// Largest heading error a fix corrects (a larger one is a wrong reading), radians.
-const HEADING_FIX_MAX_RAD: f64 = 0.3;
+const HEADING_FIX_MAX_RAD: f64 = 0.7;
 /// No heading fix while turning faster than this (the scan is a frame old), rad/s.
 const HEADING_FIX_MAX_TURN_RAD_S: f64 = 0.3;
 /// Half-width of the corridor the robot sweeps: its half-width (0.156 m) plus a margin.
@@ -484,6 +488,10 @@ const SWEEP_HALF_WIDTH_M: f64 = 0.2;
 const FRONT_EDGE_M: f64 = 0.22;
 /// Radius swept by the corners when turning in place (half-diagonal 0.27 m) plus a margin.
 const TURN_RADIUS_M: f64 = 0.3;
+/// How far one shift moves the robot along its way to clear its turning circle, metres.
+const TURN_SHIFT_M: f64 = 0.1;
+/// Shifts tried before a turn starts anyway.
+const MAX_TURN_SHIFTS: u32 = 3;
 /// Shortest side opening the robot turns into (its width 0.31 m plus margins), metres.
 const OPENING_MIN_M: f64 = 0.6;
 /// The robot turns into an opening when its centre is this close to the opening's middle.
@@ -530,8 +538,8 @@ pub struct Navigator {
     /// Odometry distance before which no new heading correction starts (each one must be
     /// followed by some driving, or the quantised turns dither in place).
     next_correction_m: f64,
-    /// Backed off a corner before the turn about to start.
-    backed_off: bool,
+    /// Shifts along the way made to clear the turning circle for the turn about to start.
+    turn_shifts: u32,
 }
 
 impl Navigator {
@@ -560,7 +568,7 @@ impl Navigator {
             camera_forward_m: 0.2,
             now_ns: 0,
             next_correction_m: 0.0,
-            backed_off: false,
+            turn_shifts: 0,
         }
     }
 
@@ -871,9 +879,9 @@ impl Navigator {
                 }
                 // Still blocked: the branch guessed from afar was not there. Try the other
                 // side (half a turn back past the start), then, if that is a wall too, the
-                // way back (a dead end).
+                // way back (a dead end). After turning round (a dead end) a quarter turn on.
                 self.attempts += 1;
-                let (next, target) = if self.attempts == 1 {
+                let (next, target) = if self.attempts == 1 && target_rad < 2.5 {
                     let other = if command == MotionCommand::Left {
                         MotionCommand::Right
                     } else {
@@ -883,14 +891,8 @@ impl Navigator {
                 } else {
                     (command, self.turn_target(pose, command, 90.0))
                 };
-                self.maneuver = Maneuver::Turning {
-                    command: next,
-                    start_heading: pose.heading_rad,
-                    target_rad: target,
-                    ramp: 0,
-                };
-                self.current = next;
-                return decision(next, target.to_degrees(), 0, intersection);
+                let sent = self.start_turn(&pose, next, target);
+                return decision(sent, target.to_degrees(), 0, intersection);
             }
             Maneuver::Creep { until_m } => {
                 let clear = self
@@ -934,14 +936,8 @@ impl Navigator {
                 if self.blind_frames >= STUCK_FRAMES {
                     self.blind_frames = 0;
                     let target = self.turn_target(pose, MotionCommand::Left, 90.0);
-                    self.maneuver = Maneuver::Turning {
-                        command: MotionCommand::Left,
-                        start_heading: pose.heading_rad,
-                        target_rad: target,
-                        ramp: 0,
-                    };
-                    self.current = MotionCommand::Left;
-                    return decision(MotionCommand::Left, target.to_degrees(), 0, intersection);
+                    let sent = self.start_turn(&pose, MotionCommand::Left, target);
+                    return decision(sent, target.to_degrees(), 0, intersection);
                 }
                 MotionCommand::Stop
             } else {
@@ -956,16 +952,9 @@ impl Navigator {
                 && let Some(command) = self.side_branch(&pose)
             {
                 let target = self.turn_target(pose, command, 90.0);
-                self.maneuver = Maneuver::Turning {
-                    command,
-                    start_heading: pose.heading_rad,
-                    target_rad: target,
-                    ramp: 0,
-                };
-                self.current = command;
-                self.pending = None;
                 self.attempts = 0;
-                return decision(command, target.to_degrees(), 0, intersection);
+                let sent = self.start_turn(&pose, command, target);
+                return decision(sent, target.to_degrees(), 0, intersection);
             }
             if let Some(turn) = self.axis_correction(pose, near) {
                 return decision(turn.0, turn.1.to_degrees(), 0, intersection);
@@ -993,27 +982,6 @@ impl Navigator {
                 })
                 .unwrap_or(first),
         };
-        // A corner inside the circle the robot sweeps when turning in place: back off first
-        // (once per turn: the way back may be blocked too).
-        if !self.backed_off
-            && self
-                .map
-                .count_region(
-                    &pose,
-                    (0.0, TURN_RADIUS_M),
-                    (-TURN_RADIUS_M, TURN_RADIUS_M),
-                    now,
-                )
-                .occupied
-                > 0
-        {
-            self.backed_off = true;
-            self.maneuver = Maneuver::Backup {
-                until_m: self.odometry.distance_m() + 0.1,
-            };
-            self.current = MotionCommand::Reverse;
-            return decision(MotionCommand::Reverse, 0.0, 0, intersection);
-        }
         // Line up with the middle of the opening before turning into it (the front wall
         // stops the robot about 1 m short of it; a corner opening starts beside the robot).
         let side = match command {
@@ -1055,21 +1023,67 @@ impl Navigator {
             MotionCommand::Reverse => (MotionCommand::Right, std::f64::consts::PI),
             c => (c, self.turn_target(pose, c, angle)),
         };
-        self.current = turn;
-        self.pending = None;
         self.attempts = 0;
         // Turns run with ramp 0: the reference's ramp set the turn's duration (and so its
         // angle) open loop; here dead reckoning ends the turn, and a ramp would only let the
         // robot roll on into the junction while the pulses slew.
         let _ = ramp;
-        self.backed_off = false;
+        let sent = self.start_turn(&pose, turn, turn_rad);
+        decision(sent, turn_rad.to_degrees(), 0, intersection)
+    }
+
+    /// Starts a turn in place of `target_rad` and returns the command to send now. The circle
+    /// the robot's corners sweep must be clear of what the local map holds: with an obstacle
+    /// inside it the robot first moves `TURN_SHIFT_M` along its way, away from it (back from
+    /// one ahead of its centre, forward from one beside or behind it when the way ahead is
+    /// clear), and the turn is decided again after the shift; after `MAX_TURN_SHIFTS` shifts
+    /// it turns anyway.
+    fn start_turn(
+        &mut self,
+        pose: &DeadReckonedPose,
+        command: MotionCommand,
+        target_rad: f64,
+    ) -> MotionCommand {
+        self.pending = None;
+        if self.turn_shifts < MAX_TURN_SHIFTS
+            && let Some((ahead_m, _)) = self.map.nearest_occupied(pose, TURN_RADIUS_M, self.now_ns)
+        {
+            self.turn_shifts += 1;
+            let ahead_clear = self
+                .map
+                .count_region(
+                    pose,
+                    (FRONT_EDGE_M, FRONT_EDGE_M + TURN_SHIFT_M + 0.05),
+                    (-SWEEP_HALF_WIDTH_M, SWEEP_HALF_WIDTH_M),
+                    self.now_ns,
+                )
+                .occupied
+                == 0;
+            let until_m = self.odometry.distance_m() + TURN_SHIFT_M;
+            let (maneuver, shift) = if ahead_m <= 0.0 && ahead_clear {
+                (Maneuver::Creep { until_m }, MotionCommand::Forward)
+            } else {
+                (Maneuver::Backup { until_m }, MotionCommand::Reverse)
+            };
+            self.maneuver = maneuver;
+            self.current = shift;
+            return shift;
+        }
+        self.turn_shifts = 0;
+        self.begin_turning(pose, command, target_rad);
+        command
+    }
+
+    /// Puts the navigator into a turn (no checks).
+    fn begin_turning(&mut self, pose: &DeadReckonedPose, command: MotionCommand, target_rad: f64) {
+        self.pending = None;
+        self.current = command;
         self.maneuver = Maneuver::Turning {
-            command: turn,
+            command,
             start_heading: pose.heading_rad,
-            target_rad: turn_rad,
+            target_rad,
             ramp: 0,
         };
-        decision(turn, turn_rad.to_degrees(), 0, intersection)
     }
 
     /// How far to turn, radians: with `snap_turn_deg` > 0 to the next multiple of it (indoor
@@ -1223,13 +1237,7 @@ impl Navigator {
         } else {
             MotionCommand::Left
         };
-        self.current = command;
-        self.maneuver = Maneuver::Turning {
-            command,
-            start_heading: pose.heading_rad,
-            target_rad: error.abs(),
-            ramp: 0,
-        };
+        self.begin_turning(&pose, command, error.abs());
         Some((command, error.abs()))
     }
 }

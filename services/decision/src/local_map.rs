@@ -180,6 +180,32 @@ impl LocalMap {
         n
     }
 
+    /// The nearest occupied point within `radius_m` of the robot's turning centre, as
+    /// `(ahead_m, left_m)` in its frame, sampled every half cell.
+    pub fn nearest_occupied(
+        &self,
+        pose: &DeadReckonedPose,
+        radius_m: f64,
+        now_ns: u64,
+    ) -> Option<(f64, f64)> {
+        let step = 0.5 * self.cell_m;
+        let n = (radius_m / step).ceil() as i32;
+        let mut best: Option<(f64, f64, f64)> = None;
+        for i in -n..=n {
+            for j in -n..=n {
+                let (a, l) = (f64::from(i) * step, f64::from(j) * step);
+                let d = a.hypot(l);
+                if d <= radius_m
+                    && best.is_none_or(|b| d < b.2)
+                    && self.state_around(pose, a, l, now_ns) == CellState::Occupied
+                {
+                    best = Some((a, l, d));
+                }
+            }
+        }
+        best.map(|(a, l, _)| (a, l))
+    }
+
     /// The nearest occupied point's lateral distance on one side (`left` or right) within
     /// `ahead_m` of the robot's centre and `max_m` to the side, sampled every half cell.
     pub fn side_distance(
@@ -458,6 +484,13 @@ mod tests {
         assert!(
             right.is_some_and(|d| (1.15..=1.3).contains(&d)),
             "{right:?}"
+        );
+        // The wall is the nearest occupied point, straight ahead, once the radius reaches it.
+        assert_eq!(map.nearest_occupied(&pose, 1.0, 2), None);
+        let near = map.nearest_occupied(&pose, 1.4, 2);
+        assert!(
+            near.is_some_and(|(a, l)| (1.15..=1.3).contains(&a) && l.abs() < 0.1),
+            "{near:?}"
         );
     }
 
