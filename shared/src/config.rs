@@ -171,20 +171,117 @@ impl CameraConfig {
 pub enum CaptureSource {
     /// The built-in simulator's rendered camera (topic `sim/camera/640x480`).
     Sim,
+    /// Two V4L2 devices: the Minoru stereo webcam (`[capture.v4l2]`).
+    V4l2,
+    /// A folder of left/right PNG pairs (`[capture.files]`).
+    Files,
 }
 
-/// Where frames come from.
+/// Where frames come from (docs/capture.md).
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CaptureConfig {
     /// The frame source.
     pub source: CaptureSource,
+    /// Capture width in pixels for the `v4l2` and `files` sources: 640 (both paths are fed,
+    /// the 320x240 pair is downscaled from the 640x480 one) or 320 (the fast path only).
+    pub width: u32,
+    /// Capture height in pixels: 480 with width 640, 240 with width 320.
+    pub height: u32,
+    /// Optional stereo calibration (OpenCV `FileStorage` YAML) to rectify every pair with;
+    /// relative paths are resolved against the config file's folder. Not used by `sim`.
+    pub calibration: Option<PathBuf>,
+    /// The Minoru's two V4L2 devices.
+    pub v4l2: V4l2CaptureConfig,
+    /// The PNG folder source.
+    pub files: FilesCaptureConfig,
 }
 
 impl Default for CaptureConfig {
     fn default() -> Self {
         Self {
             source: CaptureSource::Sim,
+            width: 640,
+            height: 480,
+            calibration: None,
+            v4l2: V4l2CaptureConfig::default(),
+            files: FilesCaptureConfig::default(),
+        }
+    }
+}
+
+/// Pixel formats requested from a V4L2 camera (both are converted to grey).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum V4l2PixelFormat {
+    /// Packed YUV 4:2:2 (`YUYV`): the luma bytes are the grey image.
+    Yuyv,
+    /// Motion JPEG (`MJPG`): each frame is decoded to grey.
+    Mjpeg,
+}
+
+/// The two V4L2 devices of the stereo webcam. The frame rate requested is `camera.fps`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct V4l2CaptureConfig {
+    /// Device of the left camera, e.g. `/dev/video0` (a stable `/dev/v4l/by-path/...` link
+    /// is better: the numbering changes with the USB plug order).
+    pub left_device: PathBuf,
+    /// Device of the right camera.
+    pub right_device: PathBuf,
+    /// Pixel format requested from both cameras.
+    pub pixel_format: V4l2PixelFormat,
+    /// Largest accepted difference between the kernel timestamps of a left and a right
+    /// frame, ms; frames with no partner this close are dropped.
+    pub max_skew_ms: f64,
+    /// Memory-mapped kernel buffers per camera (2..=16).
+    pub buffers: u32,
+    /// A camera that delivers no frame for this long is treated as disconnected, ms.
+    pub stall_timeout_ms: u64,
+    /// First delay before reopening a disconnected camera, ms (doubled after each failure).
+    pub reconnect_backoff_ms: u64,
+    /// Longest delay between reconnection attempts, ms.
+    pub reconnect_max_backoff_ms: u64,
+}
+
+impl Default for V4l2CaptureConfig {
+    fn default() -> Self {
+        Self {
+            left_device: PathBuf::from("/dev/video0"),
+            right_device: PathBuf::from("/dev/video2"),
+            pixel_format: V4l2PixelFormat::Yuyv,
+            max_skew_ms: 17.0,
+            buffers: 4,
+            stall_timeout_ms: 2000,
+            reconnect_backoff_ms: 250,
+            reconnect_max_backoff_ms: 5000,
+        }
+    }
+}
+
+/// A folder of left/right PNG pairs (`NAME_left.png` + `NAME_right.png`, or `left/NAME.png`
+/// + `right/NAME.png`), played in name order.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FilesCaptureConfig {
+    /// The folder (relative paths are resolved against the config file's folder).
+    pub folder: PathBuf,
+    /// Pairs per second, Hz; 0 = as fast as the pipeline takes them (the next pair is sent
+    /// when the ranges of the previous one arrive, or after `lockstep_timeout_ms`).
+    pub rate_hz: f64,
+    /// Start again from the first pair after the last one (otherwise the stage stops).
+    pub loop_playback: bool,
+    /// With `rate_hz = 0`: longest wait for the pipeline's ranges before the next pair, ms.
+    pub lockstep_timeout_ms: u64,
+}
+
+impl Default for FilesCaptureConfig {
+    fn default() -> Self {
+        Self {
+            folder: PathBuf::from("frames"),
+            rate_hz: 0.0,
+            loop_playback: false,
+            lockstep_timeout_ms: 1000,
         }
     }
 }
@@ -1086,6 +1183,7 @@ impl HvsConfig {
                 format!("= {} must be in 0..=1000", d.right_delay_ms),
             ));
         }
+        self.validate_capture()?;
         for (name, o) in &self.stages {
             if !STAGE_NAMES.contains(&name.as_str()) {
                 return Err(self.invalid(
@@ -1120,6 +1218,113 @@ impl HvsConfig {
                     "sim.map",
                     format!("names a map file that does not exist: {}", map.display()),
                 ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks the `[capture]` section (files and folders it names must exist for the source
+    /// in use; camera devices may appear later and are checked by the capture stage).
+    fn validate_capture(&self) -> Result<(), ConfigError> {
+        let c = &self.capture;
+        if c.source == CaptureSource::Sim {
+            return Ok(());
+        }
+        if !matches!((c.width, c.height), (640, 480) | (320, 240)) {
+            return Err(self.invalid(
+                "capture.width",
+                format!(
+                    "width = {}, height = {}: the capture size must be 640x480 or 320x240",
+                    c.width, c.height
+                ),
+            ));
+        }
+        if let Some(calibration) = &c.calibration {
+            let path = self.resolve_path(calibration);
+            if !path.is_file() {
+                return Err(self.invalid(
+                    "capture.calibration",
+                    format!("names a file that does not exist: {}", path.display()),
+                ));
+            }
+        }
+        match c.source {
+            CaptureSource::Sim => {}
+            CaptureSource::V4l2 => {
+                let v = &c.v4l2;
+                for (key, device) in [
+                    ("capture.v4l2.left_device", &v.left_device),
+                    ("capture.v4l2.right_device", &v.right_device),
+                ] {
+                    if device.as_os_str().is_empty() {
+                        return Err(self.invalid(key, "must name a V4L2 device"));
+                    }
+                }
+                if v.left_device == v.right_device {
+                    return Err(self.invalid(
+                        "capture.v4l2.right_device",
+                        format!(
+                            "= {} is also the left device; the two cameras need two devices",
+                            v.right_device.display()
+                        ),
+                    ));
+                }
+                if !(v.max_skew_ms > 0.0 && v.max_skew_ms <= 1000.0) {
+                    return Err(self.invalid(
+                        "capture.v4l2.max_skew_ms",
+                        format!("= {} must be in (0, 1000] ms", v.max_skew_ms),
+                    ));
+                }
+                if !(2..=16).contains(&v.buffers) {
+                    return Err(self.invalid(
+                        "capture.v4l2.buffers",
+                        format!("= {} must be in 2..=16", v.buffers),
+                    ));
+                }
+                if !(100..=60_000).contains(&v.stall_timeout_ms) {
+                    return Err(self.invalid(
+                        "capture.v4l2.stall_timeout_ms",
+                        format!("= {} must be in 100..=60000 ms", v.stall_timeout_ms),
+                    ));
+                }
+                if v.reconnect_backoff_ms < 10
+                    || v.reconnect_max_backoff_ms < v.reconnect_backoff_ms
+                    || v.reconnect_max_backoff_ms > 600_000
+                {
+                    return Err(self.invalid(
+                        "capture.v4l2.reconnect_max_backoff_ms",
+                        format!(
+                            "reconnect_backoff_ms = {} and reconnect_max_backoff_ms = {} need \
+                             10 <= backoff <= max backoff <= 600000 ms",
+                            v.reconnect_backoff_ms, v.reconnect_max_backoff_ms
+                        ),
+                    ));
+                }
+            }
+            CaptureSource::Files => {
+                let f = &c.files;
+                let folder = self.resolve_path(&f.folder);
+                if !folder.is_dir() {
+                    return Err(self.invalid(
+                        "capture.files.folder",
+                        format!("names a folder that does not exist: {}", folder.display()),
+                    ));
+                }
+                if !(0.0..=1000.0).contains(&f.rate_hz) {
+                    return Err(self.invalid(
+                        "capture.files.rate_hz",
+                        format!(
+                            "= {} must be in 0..=1000 Hz (0 = as fast as the pipeline takes them)",
+                            f.rate_hz
+                        ),
+                    ));
+                }
+                if !(10..=60_000).contains(&f.lockstep_timeout_ms) {
+                    return Err(self.invalid(
+                        "capture.files.lockstep_timeout_ms",
+                        format!("= {} must be in 10..=60000 ms", f.lockstep_timeout_ms),
+                    ));
+                }
             }
         }
         Ok(())
@@ -1284,6 +1489,72 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("actuator.pulses.forward.left"), "{err}");
+    }
+
+    #[test]
+    fn capture_defaults_to_sim_and_parses_v4l2() {
+        let c = parse("").unwrap();
+        assert_eq!(c.capture.source, CaptureSource::Sim);
+        let c = parse(
+            "[capture]\nsource = \"v4l2\"\nwidth = 320\nheight = 240\n\
+             [capture.v4l2]\nleft_device = \"/dev/video4\"\nright_device = \"/dev/video6\"\n\
+             pixel_format = \"mjpeg\"\nmax_skew_ms = 10\n",
+        )
+        .unwrap();
+        assert_eq!(c.capture.source, CaptureSource::V4l2);
+        assert_eq!(c.capture.v4l2.pixel_format, V4l2PixelFormat::Mjpeg);
+        assert_eq!(c.capture.v4l2.left_device, PathBuf::from("/dev/video4"));
+        assert!((c.capture.v4l2.max_skew_ms - 10.0).abs() < 1e-9);
+        assert!(!c.stage_enabled("sim"));
+    }
+
+    #[test]
+    fn minoru_example_config_is_valid() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/minoru.toml");
+        let c = HvsConfig::load(&path).expect("config/minoru.toml must stay valid");
+        assert_eq!(c.capture.source, CaptureSource::V4l2);
+        assert!(!c.stage_enabled("sim"));
+    }
+
+    #[test]
+    fn capture_values_are_checked_by_key() {
+        for (text, key) in [
+            (
+                "[capture]\nsource = \"v4l2\"\nwidth = 800\n",
+                "capture.width",
+            ),
+            (
+                "[capture]\nsource = \"v4l2\"\n[capture.v4l2]\nmax_skew_ms = 0\n",
+                "capture.v4l2.max_skew_ms",
+            ),
+            (
+                "[capture]\nsource = \"v4l2\"\n[capture.v4l2]\nleft_device = \"/dev/a\"\nright_device = \"/dev/a\"\n",
+                "capture.v4l2.right_device",
+            ),
+            (
+                "[capture]\nsource = \"v4l2\"\n[capture.v4l2]\nbuffers = 1\n",
+                "capture.v4l2.buffers",
+            ),
+            (
+                "[capture]\nsource = \"files\"\n[capture.files]\nfolder = \"/nonexistent/pairs\"\n",
+                "capture.files.folder",
+            ),
+            (
+                "[capture]\nsource = \"v4l2\"\ncalibration = \"calib/none.yml\"\n",
+                "capture.calibration",
+            ),
+        ] {
+            let err = parse(text).unwrap_err().to_string();
+            assert!(err.contains(key), "{key}: {err}");
+        }
+        let err = parse("[capture]\nsource = \"usb\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("usb"), "{err}");
+        let err = parse("[capture.v4l2]\nmax_skew = 3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("max_skew"), "{err}");
     }
 
     #[test]

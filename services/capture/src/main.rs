@@ -1,22 +1,40 @@
 //! Capture stage process: publishes every stereo pair twice, at 640x480 and at 320x240.
 //!
-//! Source `sim`: the simulator's rendered camera (`sim/camera/640x480`), which stands in for
-//! the two Minoru webcams. The 640x480 pair is copied once from the camera buffer into a loaned
-//! shared-memory sample (as a V4L2 buffer would be), and the 320x240 pair is downscaled from it
-//! directly into its own loaned sample.
+//! Sources (`capture.source`, docs/capture.md):
+//! - `sim`: the simulator's rendered camera (`sim/camera/640x480`), which stands in for the
+//!   two Minoru webcams. The 640x480 pair is copied once from the camera buffer into a loaned
+//!   shared-memory sample (as a V4L2 buffer would be), and the 320x240 pair is downscaled from
+//!   it directly into its own loaned sample.
+//! - `v4l2`: the Minoru's two cameras, paired by kernel timestamp, converted to grey straight
+//!   into the loaned sample (or through the rectification remap), reopened with backoff when a
+//!   camera drops off the USB bus.
+//! - `files`: a folder of PNG pairs at `capture.files.rate_hz`, or in lockstep with the
+//!   pipeline's range reports.
+//!
+//! At a 320x240 capture size only `frames/320x240` is published.
 
 use std::process::ExitCode;
+use std::time::{Duration, Instant};
 
+use hvs_capture::calib::{StereoCalibration, StereoRectifier};
 use hvs_capture::downscale_2x;
+use hvs_capture::files::FileSource;
+use hvs_capture::v4l2::{CameraMode, StereoCamera, StereoSpec};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::config::CaptureSource;
-use hvs_shared::messages::{FrameHeader, HI_HEIGHT, HI_WIDTH, LO_HEIGHT, LO_WIDTH};
+use hvs_shared::ipc::TopicPublisher;
+use hvs_shared::messages::{
+    FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, LO_HEIGHT, LO_WIDTH, StageHealth,
+    StereoFrame320x240, StereoFrame640x480,
+};
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 
 fn main() -> ExitCode {
     run_stage("capture", |rt| match rt.config.capture.source {
         CaptureSource::Sim => run_sim_source(rt),
+        CaptureSource::V4l2 => run_v4l2_source(rt),
+        CaptureSource::Files => run_files_source(rt),
     })
 }
 
@@ -90,6 +108,445 @@ fn run_sim_source(rt: &mut StageRuntime) -> Result<(), StageError> {
             if let Err(e) = hi.send(hi_sample) {
                 rt.report_publish_error(&e);
             }
+        }
+        Ok(LoopControl::Continue)
+    })
+}
+
+/// Capture times of one pair.
+#[derive(Debug, Clone, Copy)]
+struct PairTimes {
+    /// Left exposure, CLOCK_MONOTONIC ns.
+    left_ns: u64,
+    /// Right exposure, CLOCK_MONOTONIC ns.
+    right_ns: u64,
+    /// When the stage had the pair, CLOCK_MONOTONIC ns (start of its processing latency).
+    received_ns: u64,
+}
+
+/// Publishes pairs from a non-sim source: fills the capture-size images in place (through the
+/// rectification remap if configured), downscales the 320x240 pair from a 640x480 one.
+struct PairPublisher {
+    hi: Option<TopicPublisher<StereoFrame640x480>>,
+    lo: TopicPublisher<StereoFrame320x240>,
+    rectifier: Option<StereoRectifier>,
+    raw_left: Vec<u8>,
+    raw_right: Vec<u8>,
+    source: FrameSource,
+    frame_id: u64,
+}
+
+impl PairPublisher {
+    fn open(rt: &mut StageRuntime, source: FrameSource) -> Result<Self, StageError> {
+        let (width, height) = (rt.config.capture.width, rt.config.capture.height);
+        let hi = if width as usize == HI_WIDTH {
+            Some(rt.node.publisher(&topics::FRAMES_HI)?)
+        } else {
+            tracing::info!(
+                "{}: capture size {width}x{height}: only {} is published",
+                rt.stage,
+                topics::FRAMES_LO.path
+            );
+            None
+        };
+        let lo = rt.node.publisher(&topics::FRAMES_LO)?;
+        let rectifier = match &rt.config.capture.calibration {
+            Some(path) => {
+                let path = rt.config.resolve_path(path);
+                let calib = StereoCalibration::load(&path)?;
+                let rect = StereoRectifier::new(&calib, width, height)?;
+                tracing::info!(
+                    "{}: rectifying with {} ({})",
+                    rt.stage,
+                    path.display(),
+                    if calib.rectification.is_some() {
+                        "R1/R2/P1/P2 from the file"
+                    } else {
+                        "rectification computed"
+                    }
+                );
+                Some(rect)
+            }
+            None => None,
+        };
+        let n = width as usize * height as usize;
+        Ok(Self {
+            hi,
+            lo,
+            raw_left: if rectifier.is_some() {
+                vec![0; n]
+            } else {
+                Vec::new()
+            },
+            raw_right: if rectifier.is_some() {
+                vec![0; n]
+            } else {
+                Vec::new()
+            },
+            rectifier,
+            source,
+            frame_id: 0,
+        })
+    }
+
+    fn header(&self, times: PairTimes, width: usize, height: usize) -> FrameHeader {
+        FrameHeader {
+            frame_id: self.frame_id,
+            capture_ns: times.left_ns,
+            left_capture_ns: times.left_ns,
+            right_capture_ns: times.right_ns,
+            skew_ns: times.right_ns as i64 - times.left_ns as i64,
+            published_ns: monotonic_ns(),
+            width: width as u32,
+            height: height as u32,
+            source: self.source as u32,
+            reserved: 0,
+        }
+    }
+
+    /// Fills `left`/`right` (capture size) with `fill`, through the remap if configured.
+    fn fill_images<E>(
+        rectifier: &Option<StereoRectifier>,
+        raw: (&mut [u8], &mut [u8]),
+        left: &mut [u8],
+        right: &mut [u8],
+        fill: impl FnOnce(&mut [u8], &mut [u8]) -> Result<(), E>,
+    ) -> Result<(), PublishFailure<E>> {
+        match rectifier {
+            Some(rect) => {
+                fill(raw.0, raw.1).map_err(PublishFailure::Source)?;
+                rect.left
+                    .apply(raw.0, left)
+                    .map_err(PublishFailure::Convert)?;
+                rect.right
+                    .apply(raw.1, right)
+                    .map_err(PublishFailure::Convert)
+            }
+            None => fill(left, right).map_err(PublishFailure::Source),
+        }
+    }
+
+    /// Publishes one pair; `fill` writes the grey images. `Ok(false)`: no sample could be
+    /// loaned (reported; `fill` was not called).
+    fn publish<E>(
+        &mut self,
+        rt: &mut StageRuntime,
+        times: PairTimes,
+        fill: impl FnOnce(&mut [u8], &mut [u8]) -> Result<(), E>,
+    ) -> Result<bool, PublishFailure<E>> {
+        let mut lo_sample = match self.lo.loan() {
+            Ok(s) => s,
+            Err(e) => {
+                rt.report_publish_error(&e);
+                return Ok(false);
+            }
+        };
+        let raw = (self.raw_left.as_mut_slice(), self.raw_right.as_mut_slice());
+        self.frame_id += 1;
+        match &self.hi {
+            Some(hi) => {
+                let mut hi_sample = match hi.loan() {
+                    Ok(s) => s,
+                    Err(e) => {
+                        rt.report_publish_error(&e);
+                        return Ok(false);
+                    }
+                };
+                {
+                    let out = hi_sample.payload_mut();
+                    Self::fill_images(&self.rectifier, raw, &mut out.left, &mut out.right, fill)?;
+                    let lo_out = lo_sample.payload_mut();
+                    downscale_2x(&out.left, HI_WIDTH, HI_HEIGHT, &mut lo_out.left)
+                        .map_err(PublishFailure::Convert)?;
+                    downscale_2x(&out.right, HI_WIDTH, HI_HEIGHT, &mut lo_out.right)
+                        .map_err(PublishFailure::Convert)?;
+                    out.header = self.header(times, HI_WIDTH, HI_HEIGHT);
+                }
+                lo_sample.payload_mut().header = self.header(times, LO_WIDTH, LO_HEIGHT);
+                // The fast path first: it is the one the decisions wait for.
+                rt.send_or_report(&mut self.lo, lo_sample, monotonic_ns() - times.received_ns);
+                if let Some(hi) = &mut self.hi
+                    && let Err(e) = hi.send(hi_sample)
+                {
+                    rt.report_publish_error(&e);
+                }
+            }
+            None => {
+                {
+                    let out = lo_sample.payload_mut();
+                    Self::fill_images(&self.rectifier, raw, &mut out.left, &mut out.right, fill)?;
+                }
+                lo_sample.payload_mut().header = self.header(times, LO_WIDTH, LO_HEIGHT);
+                rt.send_or_report(&mut self.lo, lo_sample, monotonic_ns() - times.received_ns);
+            }
+        }
+        Ok(true)
+    }
+}
+
+/// Why a pair was not published.
+#[derive(Debug)]
+enum PublishFailure<E> {
+    /// The source could not deliver the images.
+    Source(E),
+    /// Remap or downscale failed (sizes; a bug).
+    Convert(hvs_capture::ConvertError),
+}
+
+impl<E: std::fmt::Display> std::fmt::Display for PublishFailure<E> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Source(e) => e.fmt(f),
+            Self::Convert(e) => e.fmt(f),
+        }
+    }
+}
+
+/// Sleeps `total` while beating; false once termination was requested.
+fn wait_beating(rt: &mut StageRuntime, total: Duration) -> bool {
+    let end = Instant::now() + total;
+    loop {
+        rt.beat_if_due();
+        let left = end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return true;
+        }
+        if !rt.node.sleep(left.min(Duration::from_millis(100))) {
+            return false;
+        }
+    }
+}
+
+fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
+    let c = rt.config.capture.clone();
+    let v = &c.v4l2;
+    let spec = StereoSpec {
+        left_device: v.left_device.clone(),
+        right_device: v.right_device.clone(),
+        mode: CameraMode {
+            width: c.width,
+            height: c.height,
+            format: v.pixel_format,
+            fps: rt.config.camera.fps,
+            buffers: v.buffers,
+        },
+        max_skew_ns: (v.max_skew_ms * 1e6) as u64,
+        stall_timeout: Duration::from_millis(v.stall_timeout_ms),
+    };
+    let mut out = PairPublisher::open(rt, FrameSource::V4l2)?;
+    let first_backoff = Duration::from_millis(v.reconnect_backoff_ms);
+    let max_backoff = Duration::from_millis(v.reconnect_max_backoff_ms);
+    let mut backoff = first_backoff;
+    let mut attempt = 0u32;
+    let devices = format!(
+        "{} + {}",
+        spec.left_device.display(),
+        spec.right_device.display()
+    );
+    loop {
+        let mut cam = match StereoCamera::open(&spec) {
+            Ok(cam) => cam,
+            Err(e) if e.is_permanent() => return Err(e.into()),
+            Err(e) => {
+                attempt += 1;
+                rt.count_error();
+                rt.set_health(StageHealth::Degraded);
+                rt.set_note(format!("v4l2 {devices}: reconnecting"));
+                tracing::warn!(
+                    "{}: {e}; retrying in {:.1} s (attempt {attempt})",
+                    rt.stage,
+                    backoff.as_secs_f64()
+                );
+                if !wait_beating(rt, backoff) {
+                    return Ok(());
+                }
+                backoff = (backoff * 2).min(max_backoff);
+                continue;
+            }
+        };
+        let (left, right) = cam.cameras();
+        for camera in [left, right] {
+            match camera.fps() {
+                Some(fps) if (fps - spec.mode.fps).abs() > 0.01 * spec.mode.fps => {
+                    tracing::warn!(
+                        "{}: camera {} runs at {fps:.2} fps, not the requested {} (camera.fps)",
+                        rt.stage,
+                        camera.device().display(),
+                        spec.mode.fps
+                    );
+                }
+                Some(_) => {}
+                None => tracing::warn!(
+                    "{}: camera {} has no frame-rate control; it runs at its default rate",
+                    rt.stage,
+                    camera.device().display()
+                ),
+            }
+        }
+        tracing::info!(
+            "{}: source v4l2 {devices}, {}, pairs within {} ms{}",
+            rt.stage,
+            spec.mode,
+            v.max_skew_ms,
+            if attempt > 0 {
+                format!(" (reconnected after {attempt} attempts)")
+            } else {
+                String::new()
+            }
+        );
+        backoff = first_backoff;
+        attempt = 0;
+        rt.set_health(StageHealth::Running);
+        rt.set_note(format!("v4l2 {devices}"));
+        rt.beat();
+        let dropped_before = rt_drops(&cam);
+        let mut dropped_total = 0u64;
+        loop {
+            if rt.node.termination_requested() {
+                tracing::info!("{}: termination requested", rt.stage);
+                return Ok(());
+            }
+            rt.beat_if_due();
+            let pair = match cam.next_pair(Duration::from_millis(50)) {
+                Ok(Some(pair)) => pair,
+                Ok(None) => continue,
+                Err(e) => {
+                    rt.report_error("capture failed, reopening the cameras", &e);
+                    break;
+                }
+            };
+            rt.count_in(1);
+            dropped_total = rt_drops(&cam) - dropped_before;
+            rt.set_drops(dropped_total);
+            let times = PairTimes {
+                left_ns: pair.pair.left.stamp_ns,
+                right_ns: pair.pair.right.stamp_ns,
+                received_ns: pair.completed_ns,
+            };
+            match out.publish(rt, times, |l, r| cam.read_pair(&pair, l, r)) {
+                Ok(true) => {}
+                Ok(false) => {
+                    if let Err(e) = cam.release_pair(&pair) {
+                        rt.report_error("capture failed, reopening the cameras", &e);
+                        break;
+                    }
+                }
+                Err(PublishFailure::Source(e)) if e.needs_reconnect() => {
+                    rt.report_error("capture failed, reopening the cameras", &e);
+                    break;
+                }
+                Err(e) => rt.report_error("pair skipped", &e),
+            }
+        }
+        tracing::debug!("{}: {dropped_total} frames dropped unpaired", rt.stage);
+        drop(cam);
+        rt.set_health(StageHealth::Degraded);
+        rt.set_note(format!("v4l2 {devices}: reconnecting"));
+        if !wait_beating(rt, backoff) {
+            return Ok(());
+        }
+    }
+}
+
+/// Frames the pairer dropped so far.
+fn rt_drops(cam: &StereoCamera) -> u64 {
+    let s = cam.stats();
+    s.dropped_left + s.dropped_right
+}
+
+fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
+    let c = rt.config.capture.clone();
+    let folder = rt.config.resolve_path(&c.files.folder);
+    let mut source = FileSource::open(&folder, c.width, c.height, c.files.loop_playback)?;
+    let mut out = PairPublisher::open(rt, FrameSource::Files)?;
+    let count = source.pairs().len();
+    tracing::info!(
+        "{}: source files {} ({count} pairs, {}x{}, {}{})",
+        rt.stage,
+        folder.display(),
+        c.width,
+        c.height,
+        if c.files.rate_hz > 0.0 {
+            format!("{} Hz", c.files.rate_hz)
+        } else {
+            "as fast as the pipeline takes them".to_string()
+        },
+        if c.files.loop_playback {
+            ", looping"
+        } else {
+            ""
+        }
+    );
+    rt.set_note(format!("files {count} pairs"));
+
+    // Publishes the next pair; false at the end of a non-looping folder.
+    let mut finished = false;
+    let mut send_next = |rt: &mut StageRuntime, out: &mut PairPublisher| -> bool {
+        if finished {
+            return false;
+        }
+        let Some(pair) = source.next_pair().cloned() else {
+            finished = true;
+            tracing::info!(
+                "{}: played all {count} pairs; idle (capture.files.loop_playback = false)",
+                rt.stage
+            );
+            rt.set_note(format!("files: all {count} pairs played"));
+            return false;
+        };
+        let now = monotonic_ns();
+        rt.count_in(1);
+        let times = PairTimes {
+            left_ns: now,
+            right_ns: now,
+            received_ns: now,
+        };
+        if let Err(e) = out.publish(rt, times, |l, r| source.load(&pair, l, r)) {
+            rt.report_error("pair skipped", &e);
+        }
+        true
+    };
+
+    let waitset = rt.waitset()?;
+    if c.files.rate_hz > 0.0 {
+        let tick = waitset
+            .attach_interval(Duration::from_secs_f64(1.0 / c.files.rate_hz))
+            .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+        return rt.run_loop(&waitset, |rt, id| {
+            if id.has_event_from(&tick) {
+                send_next(rt, &mut out);
+            }
+            Ok(LoopControl::Continue)
+        });
+    }
+    // Lockstep: the next pair goes out when the ranges of the last one arrive (the end of the
+    // pipeline), or after lockstep_timeout_ms.
+    let ranges = rt.node.subscriber(&topics::RANGES, 4)?;
+    let ranges_guard = waitset
+        .attach_notification(ranges.listener())
+        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let timeout = Duration::from_millis(c.files.lockstep_timeout_ms);
+    let tick = waitset
+        .attach_interval((timeout / 4).max(Duration::from_millis(5)))
+        .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+    send_next(rt, &mut out);
+    let mut last_sent = Instant::now();
+    rt.run_loop(&waitset, |rt, id| {
+        let mut due = false;
+        if id.has_event_from(&ranges_guard) {
+            ranges.clear_events();
+            while let Some(report) = ranges.receive()? {
+                if report.payload().frame_id >= out.frame_id {
+                    due = true;
+                }
+            }
+        }
+        if id.has_event_from(&tick) && last_sent.elapsed() >= timeout {
+            due = true;
+        }
+        if due {
+            send_next(rt, &mut out);
+            last_sent = Instant::now();
         }
         Ok(LoopControl::Continue)
     })
