@@ -162,6 +162,75 @@ pub const ALL_TOPIC_PATHS: [(&str, &str); 12] = [
     (SUPERVISOR_CONTROL.path, "hvs::ControlRequest"),
 ];
 
+/// A topic picked by its path (as typed on a command line), with its payload type: tools
+/// that take a topic name (`hvs probe`) dispatch on this to get a typed [`Topic`].
+#[derive(Debug, Clone, Copy)]
+pub enum TopicByPath {
+    /// `sim/camera/640x480` or `frames/640x480`.
+    StereoFrame640x480(&'static Topic<StereoFrame640x480>),
+    /// `frames/320x240`.
+    StereoFrame320x240(&'static Topic<StereoFrame320x240>),
+    /// `sim/gt_disparity/640x480` or `disparity/640x480`.
+    DisparityMap640x480(&'static Topic<DisparityMap640x480>),
+    /// `disparity/320x240`.
+    DisparityMap320x240(&'static Topic<DisparityMap320x240>),
+    /// `sim/truth`.
+    SimTruth(&'static Topic<SimTruth>),
+    /// `ranges`.
+    RangeReport(&'static Topic<RangeReport>),
+    /// `decisions`.
+    Decision(&'static Topic<Decision>),
+    /// `actuator/sent`.
+    ActuatorReport(&'static Topic<ActuatorReport>),
+    /// `heartbeat/<stage>`: the topic and the stage.
+    StageHeartbeat(&'static Topic<StageHeartbeat>, &'static str),
+    /// `supervisor/status`.
+    SupervisorStatus(&'static Topic<SupervisorStatus>),
+    /// `supervisor/control`.
+    ControlRequest(&'static Topic<ControlRequest>),
+}
+
+/// Looks a topic up by its path below `hvs/<instance>/` (one of [`ALL_TOPIC_PATHS`], or
+/// `heartbeat/<stage>` for a stage of [`STAGE_NAMES`](crate::config::STAGE_NAMES)).
+pub fn topic_by_path(path: &str) -> Option<TopicByPath> {
+    use TopicByPath as T;
+    Some(match path {
+        p if p == SIM_CAMERA.path => T::StereoFrame640x480(&SIM_CAMERA),
+        p if p == SIM_GT_DISPARITY.path => T::DisparityMap640x480(&SIM_GT_DISPARITY),
+        p if p == SIM_TRUTH.path => T::SimTruth(&SIM_TRUTH),
+        p if p == FRAMES_LO.path => T::StereoFrame320x240(&FRAMES_LO),
+        p if p == FRAMES_HI.path => T::StereoFrame640x480(&FRAMES_HI),
+        p if p == DISPARITY_LO.path => T::DisparityMap320x240(&DISPARITY_LO),
+        p if p == DISPARITY_HI.path => T::DisparityMap640x480(&DISPARITY_HI),
+        p if p == RANGES.path => T::RangeReport(&RANGES),
+        p if p == DECISIONS.path => T::Decision(&DECISIONS),
+        p if p == ACTUATOR_SENT.path => T::ActuatorReport(&ACTUATOR_SENT),
+        p if p == SUPERVISOR_STATUS.path => T::SupervisorStatus(&SUPERVISOR_STATUS),
+        p if p == SUPERVISOR_CONTROL.path => T::ControlRequest(&SUPERVISOR_CONTROL),
+        p => {
+            let stage = p.strip_prefix(HEARTBEAT.path)?.strip_prefix('/')?;
+            let stage = crate::config::STAGE_NAMES
+                .into_iter()
+                .find(|s| *s == stage)?;
+            T::StageHeartbeat(&HEARTBEAT, stage)
+        }
+    })
+}
+
+/// Every topic path of a pipeline: [`ALL_TOPIC_PATHS`], then `heartbeat/<stage>` for every
+/// stage, in that order (what `hvs probe list` shows and what [`topic_by_path`] accepts).
+pub fn known_topic_paths() -> Vec<String> {
+    ALL_TOPIC_PATHS
+        .iter()
+        .map(|(p, _)| (*p).to_string())
+        .chain(
+            crate::config::STAGE_NAMES
+                .iter()
+                .map(|s| format!("{}/{s}", HEARTBEAT.path)),
+        )
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -184,5 +253,30 @@ mod tests {
         paths.sort_unstable();
         paths.dedup();
         assert_eq!(paths.len(), ALL_TOPIC_PATHS.len());
+    }
+
+    #[test]
+    fn every_known_path_resolves_and_unknown_ones_do_not() {
+        for path in known_topic_paths() {
+            assert!(topic_by_path(&path).is_some(), "{path}");
+        }
+        assert!(matches!(
+            topic_by_path("heartbeat/fusion"),
+            Some(TopicByPath::StageHeartbeat(_, "fusion"))
+        ));
+        assert!(matches!(
+            topic_by_path("frames/320x240"),
+            Some(TopicByPath::StereoFrame320x240(t)) if t.path == "frames/320x240"
+        ));
+        for bad in [
+            "",
+            "heartbeat",
+            "heartbeat/",
+            "heartbeat/nope",
+            "frames",
+            "rangesx",
+        ] {
+            assert!(topic_by_path(bad).is_none(), "{bad:?}");
+        }
     }
 }

@@ -4,6 +4,7 @@ mod bench;
 mod bench_stages;
 mod control;
 mod drive;
+mod probe_cli;
 mod process;
 mod report;
 mod run;
@@ -129,6 +130,12 @@ enum Command {
     Bench {
         #[command(subcommand)]
         what: BenchCommand,
+    },
+    /// Look inside a running pipeline, read-only: topics, rates, samples, images, a live
+    /// table of the stages. Probes attach and detach at any time and never slow the pipeline.
+    Probe {
+        #[command(subcommand)]
+        what: probe_cli::ProbeCommand,
     },
     /// Stop a running pipeline in order (actuator first).
     Stop {
@@ -525,6 +532,7 @@ fn main() -> ExitCode {
                 socket,
             } => bench::run_receiver(&instance, size, transport, count, socket),
         },
+        Command::Probe { what } => probe_cli::run(what),
         Command::Stop { target, timeout } => target
             .instance()
             .and_then(|i| control::stop(&i, seconds(timeout, "--timeout")?)),
