@@ -9,15 +9,8 @@ use hvs_tests::{Pipeline, hvs, iceoryx_files, pid_of, signal_pid, stage, write_c
 use nix::sys::signal::Signal;
 
 const START: Duration = Duration::from_secs(60);
-const STAGES: [&str; 7] = [
-    "sim",
-    "capture",
-    "stereo-lo",
-    "stereo-hi",
-    "fusion",
-    "decision",
-    "actuator",
-];
+/// Every stage of the default (simulator) pipeline.
+const STAGES: [&str; 7] = hvs_shared::config::STAGE_NAMES;
 
 /// Newest decision frame id seen on the pipeline's own topic within `window`.
 fn newest_decision(node: &IpcNode, window: Duration) -> Option<u64> {

@@ -342,15 +342,7 @@ fn probe_commands_show_a_running_pipeline() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains(&format!("instance {instance}")), "{text}");
     assert!(text.contains("last decision #"), "{text}");
-    for stage in [
-        "sim",
-        "capture",
-        "stereo-lo",
-        "stereo-hi",
-        "fusion",
-        "decision",
-        "actuator",
-    ] {
+    for stage in hvs_shared::config::STAGE_NAMES {
         assert!(
             text.lines()
                 .any(|l| l.starts_with(&format!("{stage} ")) && l.contains("running")),

@@ -169,20 +169,17 @@ impl PairPublisher {
             }
             None => None,
         };
-        let n = width as usize * height as usize;
+        // Unrectified images go straight into the loaned samples: no buffers then.
+        let raw_len = if rectifier.is_some() {
+            width as usize * height as usize
+        } else {
+            0
+        };
         Ok(Self {
             hi,
             lo,
-            raw_left: if rectifier.is_some() {
-                vec![0; n]
-            } else {
-                Vec::new()
-            },
-            raw_right: if rectifier.is_some() {
-                vec![0; n]
-            } else {
-                Vec::new()
-            },
+            raw_left: vec![0; raw_len],
+            raw_right: vec![0; raw_len],
             rectifier,
             source,
             frame_id: 0,

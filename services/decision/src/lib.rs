@@ -1017,17 +1017,16 @@ impl Navigator {
                 return decision(MotionCommand::Reverse, 0.0, 0, intersection);
             }
         }
-        let (angle, ramp) = reference_turn(sides, command);
+        // Turns run with ramp 0 (the reference's ramp is not used): the reference's ramp set
+        // the turn's duration (and so its angle) open loop; here dead reckoning ends the turn,
+        // and a ramp would only let the robot roll on into the junction while the pulses slew.
+        let (angle, _reference_ramp) = reference_turn(sides, command);
         let (turn, turn_rad) = match command {
             // Dead end: turn around in place rather than back up blind.
             MotionCommand::Reverse => (MotionCommand::Right, std::f64::consts::PI),
             c => (c, self.turn_target(pose, c, angle)),
         };
         self.attempts = 0;
-        // Turns run with ramp 0: the reference's ramp set the turn's duration (and so its
-        // angle) open loop; here dead reckoning ends the turn, and a ramp would only let the
-        // robot roll on into the junction while the pulses slew.
-        let _ = ramp;
         let sent = self.start_turn(&pose, turn, turn_rad);
         decision(sent, turn_rad.to_degrees(), 0, intersection)
     }
@@ -1472,6 +1471,12 @@ mod tests {
         assert_eq!(near_membership(None, 1.0, 0.1), 0.0);
     }
 
+    /// Left, middle and right windows at the reference's printed ranges (feet), 200 pixels
+    /// each.
+    fn windows_ft(l: f64, m: f64, r: f64) -> [RangeWindow; 3] {
+        [l, m, r].map(|ft| window(ft * M_PER_FT, 200))
+    }
+
     fn window(range_m: f64, valid_px: u32) -> RangeWindow {
         RangeWindow {
             range_m: range_m as f32,
@@ -1494,18 +1499,9 @@ mod tests {
     #[test]
     fn hysteresis_keeps_one_noisy_frame_from_flipping_the_command() {
         let mut nav = navigator(DecisionPolicy::Fuzzy);
-        let ft = M_PER_FT;
-        let hallway = [
-            window(2.675 * ft, 200),
-            window(3.054 * ft, 200),
-            window(2.910 * ft, 200),
-        ];
+        let hallway = windows_ft(2.675, 3.054, 2.910);
         // One frame that alone reads as a T-bottom (front near).
-        let glitch = [
-            window(2.828 * ft, 200),
-            window(2.206 * ft, 200),
-            window(2.458 * ft, 200),
-        ];
+        let glitch = windows_ft(2.828, 2.206, 2.458);
         let mut t = 0u64;
         let mut step = |w: &[RangeWindow; 3], nav: &mut Navigator| {
             t += 33_000_000;
@@ -1539,12 +1535,7 @@ mod tests {
     #[test]
     fn the_reference_policy_reacts_to_every_frame() {
         let mut nav = navigator(DecisionPolicy::Reference);
-        let ft = M_PER_FT;
-        let glitch = [
-            window(2.828 * ft, 200),
-            window(2.206 * ft, 200),
-            window(2.458 * ft, 200),
-        ];
+        let glitch = windows_ft(2.828, 2.206, 2.458);
         let d = nav.decide(&glitch, 3, &ObstacleScan::default(), 1);
         assert_eq!(
             (d.intersection, d.command),
@@ -1555,18 +1546,9 @@ mod tests {
     #[test]
     fn a_turn_is_executed_to_its_angle_by_dead_reckoning_then_committed() {
         let p = PulseTable::default();
-        let ft = M_PER_FT;
         // A left turn (walls front and right), then, once the robot turns, a hallway.
-        let left_turn = [
-            window(2.569 * ft, 200),
-            window(2.258 * ft, 200),
-            window(1.760 * ft, 200),
-        ];
-        let hallway = [
-            window(2.675 * ft, 200),
-            window(3.054 * ft, 200),
-            window(2.910 * ft, 200),
-        ];
+        let left_turn = windows_ft(2.569, 2.258, 1.760);
+        let hallway = windows_ft(2.675, 3.054, 2.910);
         // Snapped to the hallway axes (the default), and by the reference's acos angle.
         let reference_deg = turn_angle_deg(2.258, 2.569).max(30.0);
         for (snap, expected) in [(90.0, 90.0), (0.0, reference_deg)] {

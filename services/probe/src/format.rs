@@ -23,6 +23,11 @@ pub trait Describe {
     }
 }
 
+/// A payload's time stamp, `None` when unset (0).
+fn stamp(ns: u64) -> Option<u64> {
+    (ns != 0).then_some(ns)
+}
+
 fn ms(ns: u64) -> f64 {
     ns as f64 / 1e6
 }
@@ -71,32 +76,6 @@ fn frame_json(h: &FrameHeader) -> Value {
     })
 }
 
-impl Describe for StereoFrame320x240 {
-    fn stamp_ns(&self) -> Option<u64> {
-        (self.header.published_ns != 0).then_some(self.header.published_ns)
-    }
-
-    fn describe_text(&self) -> String {
-        frame_text(&self.header)
-    }
-    fn describe_json(&self) -> Value {
-        frame_json(&self.header)
-    }
-}
-
-impl Describe for StereoFrame640x480 {
-    fn stamp_ns(&self) -> Option<u64> {
-        (self.header.published_ns != 0).then_some(self.header.published_ns)
-    }
-
-    fn describe_text(&self) -> String {
-        frame_text(&self.header)
-    }
-    fn describe_json(&self) -> Value {
-        frame_json(&self.header)
-    }
-}
-
 fn algorithm_label(code: u32) -> &'static str {
     StereoAlgorithm::from_code(code).map_or("?", StereoAlgorithm::name)
 }
@@ -133,30 +112,30 @@ fn disparity_json(h: &DisparityHeader) -> Value {
     })
 }
 
-impl Describe for DisparityMap320x240 {
-    fn stamp_ns(&self) -> Option<u64> {
-        (self.header.published_ns != 0).then_some(self.header.published_ns)
-    }
+/// `Describe` for the image payloads: they are summarised by their header (the two sizes of a
+/// frame pair share one text, the two sizes of a disparity map another).
+macro_rules! describe_by_header {
+    ($($payload:ty => $text:ident, $json:ident;)*) => {$(
+        impl Describe for $payload {
+            fn stamp_ns(&self) -> Option<u64> {
+                stamp(self.header.published_ns)
+            }
 
-    fn describe_text(&self) -> String {
-        disparity_text(&self.header)
-    }
-    fn describe_json(&self) -> Value {
-        disparity_json(&self.header)
-    }
+            fn describe_text(&self) -> String {
+                $text(&self.header)
+            }
+            fn describe_json(&self) -> Value {
+                $json(&self.header)
+            }
+        }
+    )*};
 }
 
-impl Describe for DisparityMap640x480 {
-    fn stamp_ns(&self) -> Option<u64> {
-        (self.header.published_ns != 0).then_some(self.header.published_ns)
-    }
-
-    fn describe_text(&self) -> String {
-        disparity_text(&self.header)
-    }
-    fn describe_json(&self) -> Value {
-        disparity_json(&self.header)
-    }
+describe_by_header! {
+    StereoFrame320x240 => frame_text, frame_json;
+    StereoFrame640x480 => frame_text, frame_json;
+    DisparityMap320x240 => disparity_text, disparity_json;
+    DisparityMap640x480 => disparity_text, disparity_json;
 }
 
 fn range_source_label(code: u32) -> &'static str {
@@ -173,7 +152,7 @@ fn used_windows(r: &RangeReport) -> &[RangeWindow] {
 
 impl Describe for RangeReport {
     fn stamp_ns(&self) -> Option<u64> {
-        (self.published_ns != 0).then_some(self.published_ns)
+        stamp(self.published_ns)
     }
 
     fn describe_text(&self) -> String {
@@ -237,7 +216,7 @@ impl Describe for RangeReport {
 
 impl Describe for Decision {
     fn stamp_ns(&self) -> Option<u64> {
-        (self.published_ns != 0).then_some(self.published_ns)
+        stamp(self.published_ns)
     }
 
     fn describe_text(&self) -> String {
@@ -313,7 +292,7 @@ fn sent_bytes(r: &ActuatorReport) -> &[u8] {
 
 impl Describe for ActuatorReport {
     fn stamp_ns(&self) -> Option<u64> {
-        (self.sent_ns != 0).then_some(self.sent_ns)
+        stamp(self.sent_ns)
     }
 
     fn describe_text(&self) -> String {
@@ -351,7 +330,7 @@ fn health_label(code: u32) -> &'static str {
 
 impl Describe for StageHeartbeat {
     fn stamp_ns(&self) -> Option<u64> {
-        (self.time_ns != 0).then_some(self.time_ns)
+        stamp(self.time_ns)
     }
 
     fn describe_text(&self) -> String {
@@ -400,7 +379,7 @@ impl Describe for StageHeartbeat {
 
 impl Describe for SimTruth {
     fn stamp_ns(&self) -> Option<u64> {
-        (self.time_ns != 0).then_some(self.time_ns)
+        stamp(self.time_ns)
     }
 
     fn describe_text(&self) -> String {
@@ -455,7 +434,7 @@ fn status_stages(s: &SupervisorStatus) -> &[hvs_shared::messages::StageStatusEnt
 
 impl Describe for SupervisorStatus {
     fn stamp_ns(&self) -> Option<u64> {
-        (self.time_ns != 0).then_some(self.time_ns)
+        stamp(self.time_ns)
     }
 
     fn describe_text(&self) -> String {

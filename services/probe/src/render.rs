@@ -209,6 +209,25 @@ pub fn stereo_pair_image(left: &[u8], right: &[u8], width: u32, height: u32) -> 
     })
 }
 
+/// A `width x height` picture, pixel `i` (row-major) coloured by `pixel(i)`, with the legend
+/// of `scale` on the right.
+fn with_legend(
+    width: u32,
+    height: u32,
+    scale: &ColourScale,
+    pixel: impl Fn(usize) -> [u8; 3],
+) -> RgbImage {
+    let w = width as usize;
+    let mut img = RgbImage::new(width + LEGEND_WIDTH_PX, height);
+    for y in 0..height {
+        for x in 0..width {
+            img.put_pixel(x, y, Rgb(pixel(y as usize * w + x as usize)));
+        }
+    }
+    draw_legend(&mut img, width, scale);
+    img
+}
+
 /// A disparity map in the colour map (invalid pixels black) with the legend on the right:
 /// `(width + LEGEND_WIDTH_PX) x height`.
 pub fn disparity_image(
@@ -217,19 +236,10 @@ pub fn disparity_image(
     height: u32,
     scale: &ColourScale,
 ) -> RgbImage {
-    let w = width as usize;
-    let mut img = RgbImage::new(width + LEGEND_WIDTH_PX, height);
-    for y in 0..height {
-        for x in 0..width {
-            let d = disparity_q8
-                .get(y as usize * w + x as usize)
-                .copied()
-                .unwrap_or(0);
-            img.put_pixel(x, y, Rgb(scale.colour_q8(d).unwrap_or([0, 0, 0])));
-        }
-    }
-    draw_legend(&mut img, width, scale);
-    img
+    with_legend(width, height, scale, |i| {
+        let d = disparity_q8.get(i).copied().unwrap_or(0);
+        scale.colour_q8(d).unwrap_or([0, 0, 0])
+    })
 }
 
 /// The fused map over the left image: the left image at half brightness, and every pixel of
@@ -241,23 +251,15 @@ pub fn fused_image(
     height: u32,
     scale: &ColourScale,
 ) -> RgbImage {
-    let w = width as usize;
-    let mut img = RgbImage::new(width + LEGEND_WIDTH_PX, height);
-    for y in 0..height {
-        for x in 0..width {
-            let i = y as usize * w + x as usize;
-            let c = match fused_q8.get(i).and_then(|&d| scale.colour_q8(d)) {
-                Some(c) => c,
-                None => {
-                    let g = left.get(i).copied().unwrap_or(0) / 2;
-                    [g, g, g]
-                }
-            };
-            img.put_pixel(x, y, Rgb(c));
+    with_legend(width, height, scale, |i| {
+        match fused_q8.get(i).and_then(|&d| scale.colour_q8(d)) {
+            Some(c) => c,
+            None => {
+                let g = left.get(i).copied().unwrap_or(0) / 2;
+                [g, g, g]
+            }
         }
-    }
-    draw_legend(&mut img, width, scale);
-    img
+    })
 }
 
 #[cfg(test)]
