@@ -1,4 +1,4 @@
-//! `hvs probe list|hz|echo|snapshot|top`: read-only views of a running pipeline from a
+//! `hvs probe list|hz|echo|snapshot|top|record`: read-only views of a running pipeline from a
 //! separate process (the logic lives in the `hvs-probe` crate; see docs/probe.md).
 
 use std::io::Write;
@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use hvs_probe::attach::{self, list_json, render_list};
+use hvs_probe::record::{self, RecordOptions};
 use hvs_probe::{EchoOptions, HzOptions, Probe, SnapshotOptions, TopOptions};
 use hvs_shared::config::HvsConfig;
 
@@ -88,6 +89,26 @@ pub enum ProbeCommand {
         /// Seconds between frames.
         #[arg(long, default_value_t = 1.0, value_name = "SECONDS")]
         refresh_s: f64,
+    },
+    /// Record topics into an MCAP file (Foxglove/Lichtblick open it: images as
+    /// foxglove.RawImage) until Ctrl-C or --duration-s; lost samples are counted in the file's
+    /// metadata and printed at the end; a full disk ends it with a readable file.
+    Record {
+        #[command(flatten)]
+        target: Target,
+        /// Output MCAP file.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Topics to record (default: frames/320x240 frames/640x480 ranges decisions
+        /// actuator/sent).
+        #[arg(long, num_args = 1.., value_name = "TOPIC")]
+        topics: Vec<String>,
+        /// Stop after this many seconds.
+        #[arg(long, value_name = "SECONDS")]
+        duration_s: Option<f64>,
+        /// Print the summary as JSON.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -192,6 +213,53 @@ pub fn run(command: ProbeCommand) -> anyhow::Result<()> {
             };
             let probe = Probe::attach(&target.instance()?)?;
             attach::top(&probe, &opts, &mut out)?;
+        }
+        ProbeCommand::Record {
+            target,
+            out: file,
+            topics,
+            duration_s,
+            json,
+        } => {
+            let opts = RecordOptions {
+                out: file,
+                topics,
+                duration: duration_s.map(|d| seconds(d, "--duration-s")).transpose()?,
+            };
+            let probe = Probe::attach(&target.instance()?)?;
+            let summary = record::record(&probe, &opts, &mut std::io::stderr())?;
+            let text = if json {
+                format!("{}\n", serde_json::to_string(&summary)?)
+            } else {
+                let mut t = format!(
+                    "wrote {} ({:.1} MB, {:.1} s){}\n",
+                    summary.out.display(),
+                    summary.bytes as f64 / 1e6,
+                    summary.duration_s,
+                    summary
+                        .cut_short
+                        .as_ref()
+                        .map(|c| format!(", cut short: {c}"))
+                        .unwrap_or_default()
+                );
+                for (path, c) in &summary.topics {
+                    t.push_str(&format!(
+                        "  {path:16} {:6} written {:6} dropped\n",
+                        c.written, c.dropped
+                    ));
+                }
+                t
+            };
+            out.write_all(text.as_bytes())
+                .and_then(|()| out.flush())
+                .context("writing the summary")?;
+            if summary.dropped() > 0 {
+                tracing::warn!(
+                    "{} samples were lost before the recorder read them (counted in the file's \
+                     metadata)",
+                    summary.dropped()
+                );
+            }
         }
     }
     Ok(())

@@ -123,7 +123,7 @@ pub enum AttachError {
 
 /// A probe attached to one instance: an iceoryx2 node that only subscribes.
 pub struct Probe {
-    node: IpcNode,
+    pub(crate) node: IpcNode,
 }
 
 impl Probe {
@@ -208,7 +208,7 @@ impl Probe {
     }
 
     /// Subscribes to an existing topic with its own settings and a queue of `buffer`.
-    fn subscribe<T: Payload>(
+    pub(crate) fn subscribe<T: Payload>(
         &self,
         topic: &Topic<T>,
         stage: Option<&str>,
@@ -258,7 +258,7 @@ pub fn resolve_topic(path: &str) -> Result<TopicByPath, AttachError> {
 }
 
 /// Short payload type name (`Decision`) of `T`.
-fn short_type_name<T>() -> &'static str {
+pub(crate) fn short_type_name<T>() -> &'static str {
     let full = core::any::type_name::<T>();
     full.rsplit("::").next().unwrap_or(full)
 }

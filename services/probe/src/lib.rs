@@ -15,6 +15,7 @@
 pub mod attach;
 pub mod format;
 pub mod rate;
+pub mod record;
 pub mod render;
 pub mod top;
 
