@@ -24,6 +24,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use hvs_shared::clock::monotonic_ns;
+use hvs_shared::error_chain;
 use hvs_shared::ipc::{ReceiveError, TopicSubscriber};
 use hvs_shared::messages::{FrameHeader, StereoFrame320x240, StereoFrame640x480};
 use hvs_shared::topics::{Topic, TopicByPath};
@@ -167,6 +169,8 @@ impl Seek for CountingFile {
 
 /// A payload type a recording takes.
 pub trait Recordable: Payload {
+    /// Stereo frames: recorded as two images.
+    const STEREO: bool = false;
     /// The pair's header and images, for stereo frames.
     fn stereo(&self) -> Option<(&FrameHeader, &[u8], &[u8])> {
         None
@@ -174,12 +178,14 @@ pub trait Recordable: Payload {
 }
 
 impl Recordable for StereoFrame320x240 {
+    const STEREO: bool = true;
     fn stereo(&self) -> Option<(&FrameHeader, &[u8], &[u8])> {
         Some((&self.header, &self.left, &self.right))
     }
 }
 
 impl Recordable for StereoFrame640x480 {
+    const STEREO: bool = true;
     fn stereo(&self) -> Option<(&FrameHeader, &[u8], &[u8])> {
         Some((&self.header, &self.left, &self.right))
     }
@@ -230,7 +236,7 @@ impl<T: Recordable> Source for TopicSource<T> {
                     }
                 }
                 None => {
-                    let log_ns = sink.wall_ns(p.stamp_ns().unwrap_or_else(monotonic_now_ns));
+                    let log_ns = sink.wall_ns(p.stamp_ns().unwrap_or_else(monotonic_ns));
                     let msg = p.describe_json().to_string();
                     sink.write(self.channels[0], log_ns, msg.as_bytes())?;
                 }
@@ -243,10 +249,6 @@ impl<T: Recordable> Source for TopicSource<T> {
     fn dropped(&self) -> u64 {
         self.sub.dropped()
     }
-}
-
-fn monotonic_now_ns() -> u64 {
-    hvs_shared::clock::monotonic_ns()
 }
 
 /// A `foxglove.RawImage` JSON message of one image of a pair.
@@ -268,7 +270,7 @@ fn raw_image(header: &FrameHeader, side: &str, pixels: &[u8], log_ns: u64, hvs: 
 
 /// The MCAP writer and the bookkeeping for a clean end.
 struct Sink {
-    writer: Option<mcap::Writer<CountingFile>>,
+    writer: mcap::Writer<CountingFile>,
     sequence: u32,
     /// CLOCK_REALTIME minus CLOCK_MONOTONIC at the start, ns.
     wall_offset_ns: i128,
@@ -279,12 +281,6 @@ impl Sink {
         (monotonic_ns as i128 + self.wall_offset_ns).max(0) as u64
     }
 
-    fn writer(&mut self) -> Result<&mut mcap::Writer<CountingFile>, Drained> {
-        self.writer
-            .as_mut()
-            .ok_or_else(|| Drained::Write("the recording is already closed".into()))
-    }
-
     fn write(&mut self, channel: u16, log_ns: u64, data: &[u8]) -> Result<(), Drained> {
         self.sequence = self.sequence.wrapping_add(1);
         let header = mcap::records::MessageHeader {
@@ -293,9 +289,9 @@ impl Sink {
             log_time: log_ns,
             publish_time: log_ns,
         };
-        self.writer()?
+        self.writer
             .write_to_known_channel(&header, data)
-            .map_err(|e| Drained::Write(chain(&e)))
+            .map_err(|e| Drained::Write(error_chain(&e)))
     }
 }
 
@@ -304,11 +300,7 @@ fn wall_offset_ns() -> i128 {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_nanos() as i128)
         .unwrap_or(0);
-    wall - monotonic_now_ns() as i128
-}
-
-fn recordable(path: &str) -> bool {
-    DEFAULT_TOPICS.contains(&path)
+    wall - monotonic_ns() as i128
 }
 
 /// Subscribes to one topic and adds its channels.
@@ -322,8 +314,7 @@ fn open_source<T: Recordable>(
     let sub = probe.subscribe(topic, None, path, topic.max_buffer)?;
     let no_meta = BTreeMap::new();
     let mcap_err = |e: mcap::McapError| create(e.to_string());
-    let is_stereo = path.starts_with("frames/");
-    let channels = if is_stereo {
+    let channels = if T::STEREO {
         let schema = writer
             .add_schema(
                 "foxglove.RawImage",
@@ -370,14 +361,18 @@ pub fn record(
     } else {
         opts.topics.clone()
     };
+    let not_recordable = |path: &str| RecordError::NotRecordable {
+        topic: path.to_string(),
+        known: DEFAULT_TOPICS.join(", "),
+    };
+    // Every topic checked before the file is created.
+    let mut resolved = Vec::new();
     for path in &paths {
-        resolve_topic(path)?;
-        if !recordable(path) {
-            return Err(RecordError::NotRecordable {
-                topic: path.clone(),
-                known: DEFAULT_TOPICS.join(", "),
-            });
+        let by = resolve_topic(path)?;
+        if !DEFAULT_TOPICS.contains(&path.as_str()) {
+            return Err(not_recordable(path));
         }
+        resolved.push((path, by));
     }
     let out = opts.out.clone();
     let create = |detail: String| RecordError::Create {
@@ -385,7 +380,9 @@ pub fn record(
         detail,
     };
     let reserve_path = reserve_path(&out);
-    let reserve = std::fs::write(&reserve_path, vec![0u8; RESERVE_BYTES]);
+    if let Err(e) = std::fs::write(&reserve_path, vec![0u8; RESERVE_BYTES]) {
+        tracing::debug!("no reserve file next to the recording: {e}");
+    }
     let file = File::create(&out).map_err(|e| create(e.to_string()))?;
     let options = mcap::WriteOptions::new()
         .profile("")
@@ -401,18 +398,14 @@ pub fn record(
         })
         .map_err(|e| create(e.to_string()))?;
     let mut sources = Vec::new();
-    for path in &paths {
-        let by = resolve_topic(path)?;
+    for (path, by) in resolved {
         let source = match by {
             TopicByPath::StereoFrame320x240(t) => open_source(t, probe, path, &mut writer, &create),
             TopicByPath::StereoFrame640x480(t) => open_source(t, probe, path, &mut writer, &create),
             TopicByPath::RangeReport(t) => open_source(t, probe, path, &mut writer, &create),
             TopicByPath::Decision(t) => open_source(t, probe, path, &mut writer, &create),
             TopicByPath::ActuatorReport(t) => open_source(t, probe, path, &mut writer, &create),
-            _ => Err(RecordError::NotRecordable {
-                topic: path.clone(),
-                known: DEFAULT_TOPICS.join(", "),
-            }),
+            _ => Err(not_recordable(path)),
         };
         sources.push(source?);
     }
@@ -420,7 +413,7 @@ pub fn record(
     writer.flush().map_err(|e| create(e.to_string()))?;
     let mut good_len = pos.load(Ordering::Relaxed);
     let mut sink = Sink {
-        writer: Some(writer),
+        writer,
         sequence: 0,
         wall_offset_ns: wall_offset_ns(),
     };
@@ -460,25 +453,12 @@ pub fn record(
         }
         if last_flush.elapsed() >= Duration::from_secs(1) {
             last_flush = Instant::now();
-            let flush = sink
-                .writer()
-                .and_then(|w| w.flush().map_err(|e| Drained::Write(chain(&e))));
-            match flush {
-                Ok(()) => {
-                    good_len = pos.load(Ordering::Relaxed);
-                    flushed = counts.clone();
-                }
-                Err(Drained::Write(e)) => {
-                    cut_short = Some(e);
-                    break 'record;
-                }
-                Err(Drained::Receive(e)) => {
-                    return Err(RecordError::Receive {
-                        topic: "(flush)".to_string(),
-                        source: e,
-                    });
-                }
+            if let Err(e) = sink.writer.flush() {
+                cut_short = Some(error_chain(&e));
+                break 'record;
             }
+            good_len = pos.load(Ordering::Relaxed);
+            flushed = counts.clone();
             let _ = writeln!(
                 progress,
                 "recording {}: {:.0} s, {} messages, {:.1} MB, {} dropped",
@@ -494,51 +474,28 @@ pub fn record(
         }
     }
     let duration_s = start.elapsed().as_secs_f64();
-    if cut_short.is_some() {
-        keep_flushed(&mut counts, &flushed);
-    }
-    let mut metadata = BTreeMap::new();
-    metadata.insert("instance".to_string(), probe.instance().to_string());
-    metadata.insert("duration_s".to_string(), format!("{duration_s:.3}"));
-    for (path, c) in &counts {
-        metadata.insert(format!("written.{path}"), c.written.to_string());
-        metadata.insert(format!("dropped.{path}"), c.dropped.to_string());
-        metadata.insert(format!("lost_at_end.{path}"), c.lost_at_end.to_string());
-    }
-    if let Some(cause) = &cut_short {
-        metadata.insert("cut_short".to_string(), cause.clone());
-    }
     let _ = std::fs::remove_file(&reserve_path);
-    let mut writer = sink.writer.take();
-    let bytes = match (&cut_short, writer.as_mut()) {
-        (None, Some(w)) => {
-            let finished = w
-                .write_metadata(&mcap::records::Metadata {
-                    name: METADATA_NAME.to_string(),
-                    metadata: metadata.clone(),
-                })
-                .and_then(|()| w.finish().map(|_| ()));
-            match finished {
-                Ok(()) => file_len(&opts.out),
-                Err(e) => {
-                    let cause = chain(&e);
-                    keep_flushed(&mut counts, &flushed);
-                    for (path, c) in &counts {
-                        metadata.insert(format!("written.{path}"), c.written.to_string());
-                        metadata.insert(format!("lost_at_end.{path}"), c.lost_at_end.to_string());
-                    }
-                    metadata.insert("cut_short".to_string(), cause.clone());
-                    cut_short = Some(cause.clone());
-                    close_cut_short(writer.take(), &opts.out, good_len, &metadata, &cause)?
-                }
-            }
-        }
-        (Some(cause), _) => close_cut_short(writer.take(), &opts.out, good_len, &metadata, cause)?,
-        (None, None) => file_len(&opts.out),
+    let Sink { mut writer, .. } = sink;
+    let finished = match &cut_short {
+        None => writer
+            .write_metadata(&mcap::records::Metadata {
+                name: METADATA_NAME.to_string(),
+                metadata: recording_metadata(probe.instance(), duration_s, &counts, None),
+            })
+            .and_then(|()| writer.finish().map(|_| ()))
+            .map_err(|e| error_chain(&e)),
+        Some(cause) => Err(cause.clone()),
     };
-    if let Err(e) = reserve {
-        tracing::debug!("no reserve file next to the recording: {e}");
-    }
+    let bytes = match finished {
+        Ok(()) => file_len(&opts.out),
+        Err(cause) => {
+            keep_flushed(&mut counts, &flushed);
+            let metadata = recording_metadata(probe.instance(), duration_s, &counts, Some(&cause));
+            let bytes = close_cut_short(writer, &opts.out, good_len, &metadata, &cause)?;
+            cut_short = Some(cause);
+            bytes
+        }
+    };
     Ok(RecordSummary {
         out: opts.out.clone(),
         topics: counts,
@@ -546,6 +503,27 @@ pub fn record(
         duration_s,
         cut_short,
     })
+}
+
+/// The `hvs.recording` metadata record's entries.
+fn recording_metadata(
+    instance: &str,
+    duration_s: f64,
+    counts: &BTreeMap<String, TopicCounts>,
+    cut_short: Option<&str>,
+) -> BTreeMap<String, String> {
+    let mut metadata = BTreeMap::new();
+    metadata.insert("instance".to_string(), instance.to_string());
+    metadata.insert("duration_s".to_string(), format!("{duration_s:.3}"));
+    for (path, c) in counts {
+        metadata.insert(format!("written.{path}"), c.written.to_string());
+        metadata.insert(format!("dropped.{path}"), c.dropped.to_string());
+        metadata.insert(format!("lost_at_end.{path}"), c.lost_at_end.to_string());
+    }
+    if let Some(cause) = cut_short {
+        metadata.insert("cut_short".to_string(), cause.to_string());
+    }
+    metadata
 }
 
 /// After a write error only the samples of whole chunks are in the file: the rest count as
@@ -559,18 +537,6 @@ fn keep_flushed(
         c.lost_at_end = c.written.saturating_sub(kept);
         c.written = kept;
     }
-}
-
-/// An error with its causes: `I/O error from writing: No space left on device (os error 28)`.
-fn chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
-    text
 }
 
 fn file_len(path: &Path) -> u64 {
@@ -589,7 +555,7 @@ fn reserve_path(out: &Path) -> PathBuf {
 /// Ends a recording after a write error: cuts the file back to `good_len` (the end of the
 /// last whole chunk) and appends the metadata, DataEnd and Footer records and the magic.
 fn close_cut_short(
-    writer: Option<mcap::Writer<CountingFile>>,
+    writer: mcap::Writer<CountingFile>,
     path: &Path,
     good_len: u64,
     metadata: &BTreeMap<String, String>,
@@ -600,14 +566,8 @@ fn close_cut_short(
         cause: cause.to_string(),
         detail,
     };
-    let mut file = match writer {
-        // `into_inner` hands the file back without writing a summary.
-        Some(w) => w.into_inner().file,
-        None => std::fs::OpenOptions::new()
-            .write(true)
-            .open(path)
-            .map_err(|e| close(e.to_string()))?,
-    };
+    // `into_inner` hands the file back without writing a summary.
+    let mut file = writer.into_inner().file;
     file.set_len(good_len).map_err(|e| close(e.to_string()))?;
     file.seek(SeekFrom::Start(good_len))
         .map_err(|e| close(e.to_string()))?;
