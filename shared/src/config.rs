@@ -175,6 +175,8 @@ pub enum CaptureSource {
     V4l2,
     /// A folder of left/right PNG pairs (`[capture.files]`).
     Files,
+    /// An MCAP recording of `hvs probe record` / `hvs run --record` (`[capture.replay]`).
+    Replay,
 }
 
 /// Where frames come from (docs/capture.md).
@@ -195,6 +197,8 @@ pub struct CaptureConfig {
     pub v4l2: V4l2CaptureConfig,
     /// The PNG folder source.
     pub files: FilesCaptureConfig,
+    /// The recording source.
+    pub replay: ReplayCaptureConfig,
 }
 
 impl Default for CaptureConfig {
@@ -206,6 +210,7 @@ impl Default for CaptureConfig {
             calibration: None,
             v4l2: V4l2CaptureConfig::default(),
             files: FilesCaptureConfig::default(),
+            replay: ReplayCaptureConfig::default(),
         }
     }
 }
@@ -282,6 +287,30 @@ impl Default for FilesCaptureConfig {
             rate_hz: 0.0,
             loop_playback: false,
             lockstep_timeout_ms: 1000,
+        }
+    }
+}
+
+/// A recording played back through the pipeline (docs/capture.md, "Replay").
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReplayCaptureConfig {
+    /// The MCAP file (relative paths are resolved against the config file's folder).
+    pub file: PathBuf,
+    /// Pairs per second, Hz; 0 = as fast as the pipeline takes them (lockstep: the next pair
+    /// goes out when the decision on the previous one arrives). Only lockstep reproduces the
+    /// recorded decisions exactly.
+    pub rate_hz: f64,
+    /// In lockstep: longest wait for the pipeline before the next pair, ms.
+    pub lockstep_timeout_ms: u64,
+}
+
+impl Default for ReplayCaptureConfig {
+    fn default() -> Self {
+        Self {
+            file: PathBuf::from("run.mcap"),
+            rate_hz: 0.0,
+            lockstep_timeout_ms: 2000,
         }
     }
 }
@@ -1326,6 +1355,31 @@ impl HvsConfig {
                     ));
                 }
             }
+            CaptureSource::Replay => {
+                let r = &c.replay;
+                let file = self.resolve_path(&r.file);
+                if !file.is_file() {
+                    return Err(self.invalid(
+                        "capture.replay.file",
+                        format!("names a file that does not exist: {}", file.display()),
+                    ));
+                }
+                if !(0.0..=1000.0).contains(&r.rate_hz) {
+                    return Err(self.invalid(
+                        "capture.replay.rate_hz",
+                        format!(
+                            "= {} must be in 0..=1000 Hz (0 = as fast as the pipeline takes them)",
+                            r.rate_hz
+                        ),
+                    ));
+                }
+                if !(10..=60_000).contains(&r.lockstep_timeout_ms) {
+                    return Err(self.invalid(
+                        "capture.replay.lockstep_timeout_ms",
+                        format!("= {} must be in 10..=60000 ms", r.lockstep_timeout_ms),
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -1339,9 +1393,24 @@ impl HvsConfig {
         base.join(p)
     }
 
-    /// Whether a stage is enabled (default: all, and `sim` only with the sim capture source).
+    /// Replaces the frame source with the recording `file` (`hvs run --replay`): the
+    /// simulator and the actuator are off unless `[stages.*]` enables them (there is no robot
+    /// to drive; the recorded actuator output feeds the decision's dead reckoning).
+    /// A relative `file` is taken from the current folder (a command-line path).
+    pub fn use_replay(&mut self, file: &Path) -> Result<(), ConfigError> {
+        self.capture.source = CaptureSource::Replay;
+        self.capture.replay.file = std::path::absolute(file).unwrap_or_else(|_| file.to_path_buf());
+        self.validate()
+    }
+
+    /// Whether a stage is enabled (default: all, `sim` only with the sim capture source, and
+    /// `actuator` not in a replay).
     pub fn stage_enabled(&self, stage: &str) -> bool {
-        let default = stage != "sim" || self.capture.source == CaptureSource::Sim;
+        let default = match stage {
+            "sim" => self.capture.source == CaptureSource::Sim,
+            "actuator" => self.capture.source != CaptureSource::Replay,
+            _ => true,
+        };
         self.stages
             .get(stage)
             .and_then(|o| o.enabled)

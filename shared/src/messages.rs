@@ -88,7 +88,7 @@ impl FrameSource {
     }
 }
 
-/// Header of a stereo frame pair (64 bytes).
+/// Header of a stereo frame pair (72 bytes).
 #[repr(C)]
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
 #[type_name("hvs::FrameHeader")]
@@ -113,7 +113,15 @@ pub struct FrameHeader {
     pub source: u32,
     /// Reserved, zero.
     pub reserved: u32,
+    /// Replay only: the 640x480 frame whose ranges the recorded run fused with this frame
+    /// ([`NO_HI_FRAME`]: none), so the fusion repeats the recorded choice instead of a
+    /// timing-dependent one. 0 (live): the fusion takes the freshest long-range result.
+    pub replay_hi_frame_id: u64,
 }
+
+/// [`FrameHeader::replay_hi_frame_id`] of a replayed frame the recorded run fused with no
+/// long-range result.
+pub const NO_HI_FRAME: u64 = u64::MAX;
 
 macro_rules! stereo_frame {
     ($name:ident, $type_name:literal, $w:expr, $h:expr, $doc:literal) => {
@@ -145,7 +153,25 @@ macro_rules! stereo_frame {
                 self.header.frame_id
             }
         }
+
+        impl StereoPayload for $name {
+            fn parts(&self) -> (&FrameHeader, &[u8], &[u8]) {
+                (&self.header, &self.left, &self.right)
+            }
+
+            fn parts_mut(&mut self) -> (&mut FrameHeader, &mut [u8], &mut [u8]) {
+                (&mut self.header, &mut self.left, &mut self.right)
+            }
+        }
     };
+}
+
+/// A stereo pair payload of either size.
+pub trait StereoPayload: Pod {
+    /// The header and the left and right images.
+    fn parts(&self) -> (&FrameHeader, &[u8], &[u8]);
+    /// The same, writable (filling a loaned sample).
+    fn parts_mut(&mut self) -> (&mut FrameHeader, &mut [u8], &mut [u8]);
 }
 
 stereo_frame!(
@@ -153,14 +179,14 @@ stereo_frame!(
     "hvs::StereoFrame320x240",
     LO_WIDTH,
     LO_HEIGHT,
-    "A 320x240 grey stereo pair: the fast path (153 664 bytes)."
+    "A 320x240 grey stereo pair: the fast path (153 672 bytes)."
 );
 stereo_frame!(
     StereoFrame640x480,
     "hvs::StereoFrame640x480",
     HI_WIDTH,
     HI_HEIGHT,
-    "A 640x480 grey stereo pair: the long-range path (614 464 bytes)."
+    "A 640x480 grey stereo pair: the long-range path (614 472 bytes)."
 );
 
 /// Stereo algorithms (the `algorithm` code of a [`DisparityHeader`]).
@@ -572,6 +598,26 @@ impl SendReason {
         }
     }
 
+    /// Every reason.
+    pub const ALL: [Self; 5] = [
+        Self::Decision,
+        Self::WatchdogNeutral,
+        Self::ShutdownNeutral,
+        Self::ErrorNeutral,
+        Self::StartupNeutral,
+    ];
+
+    /// Lower-case label (`hvs probe echo`, recordings).
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Decision => "decision",
+            Self::WatchdogNeutral => "watchdog-neutral",
+            Self::ShutdownNeutral => "shutdown-neutral",
+            Self::ErrorNeutral => "error-neutral",
+            Self::StartupNeutral => "startup-neutral",
+        }
+    }
+
     /// True for every neutral (stop) reason.
     pub fn is_neutral(self) -> bool {
         !matches!(self, Self::Decision)
@@ -896,9 +942,9 @@ mod tests {
 
     #[test]
     fn sizes_match_docs_ipc_md() {
-        assert_eq!(size_of::<FrameHeader>(), 64);
-        assert_eq!(size_of::<StereoFrame320x240>(), 64 + 2 * 76_800);
-        assert_eq!(size_of::<StereoFrame640x480>(), 64 + 2 * 307_200);
+        assert_eq!(size_of::<FrameHeader>(), 72);
+        assert_eq!(size_of::<StereoFrame320x240>(), 72 + 2 * 76_800);
+        assert_eq!(size_of::<StereoFrame640x480>(), 72 + 2 * 307_200);
         assert_eq!(size_of::<DisparityHeader>(), 64);
         assert_eq!(size_of::<DisparityMap320x240>(), 64 + 2 * 76_800);
         assert_eq!(size_of::<DisparityMap640x480>(), 64 + 2 * 307_200);
@@ -919,7 +965,7 @@ mod tests {
         assert_eq!(offset_of!(FrameHeader, skew_ns), 32);
         assert_eq!(offset_of!(FrameHeader, width), 48);
         assert_eq!(offset_of!(FrameHeader, source), 56);
-        assert_eq!(offset_of!(StereoFrame320x240, right), 64 + 76_800);
+        assert_eq!(offset_of!(StereoFrame320x240, right), 72 + 76_800);
         assert_eq!(offset_of!(DisparityHeader, algorithm), 56);
         assert_eq!(offset_of!(RangeReport, windows), 48);
         assert_eq!(offset_of!(RangeReport, scan), 176);

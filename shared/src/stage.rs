@@ -48,6 +48,9 @@ pub struct StageArgs {
     /// Stage name (for example `stereo-lo`); defaults to the binary's role.
     #[arg(long, value_name = "NAME")]
     pub stage: Option<String>,
+    /// Replay this MCAP recording instead of the config's frame source (`hvs run --replay`).
+    #[arg(long, value_name = "FILE")]
+    pub replay: Option<PathBuf>,
 }
 
 /// Why a stage could not start.
@@ -189,6 +192,9 @@ impl StageRuntime {
         if let Some(instance) = &args.instance {
             validate_instance_name(instance).map_err(StageStartError::Instance)?;
             config.instance = instance.clone();
+        }
+        if let Some(file) = &args.replay {
+            config.use_replay(file)?;
         }
         let stage = args.stage.clone().unwrap_or_else(|| role.to_string());
         let node = IpcNode::create(&config.instance, &stage)?;

@@ -33,7 +33,7 @@
 //! | `disparity/640x480` | [`DisparityMap640x480`] | stereo-hi | fusion, probe |
 //! | `ranges` | [`RangeReport`] | fusion | decision, probe |
 //! | `decisions` | [`Decision`] | decision | actuator, supervisor, probe |
-//! | `actuator/sent` | [`ActuatorReport`] | actuator | decision (dead reckoning), supervisor, probe |
+//! | `actuator/sent` | [`ActuatorReport`] | actuator (capture in a replay) | decision (dead reckoning), supervisor, probe |
 //! | `heartbeat/<stage>` | [`StageHeartbeat`] | each stage | supervisor, probe |
 //! | `supervisor/status` | [`SupervisorStatus`] | supervisor | `hvs status`, probe |
 //! | `supervisor/control` | [`ControlRequest`] | `hvs restart`, `hvs stop` | supervisor |

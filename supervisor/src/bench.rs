@@ -346,6 +346,8 @@ pub fn run_pipeline(config: PathBuf, duration: Duration) -> anyhow::Result<()> {
         instance: Some(format!("bench{}", std::process::id())),
         duration: Some(duration),
         report: None,
+        replay: None,
+        record: None,
     })?;
     let secs = report.duration_s.max(1e-3);
     println!();

@@ -46,6 +46,16 @@ enum Command {
         /// Write a JSON report (per-stage counters, latencies) here when stopping.
         #[arg(long, value_name = "FILE")]
         report: Option<PathBuf>,
+        /// Play an MCAP recording through the pipeline instead of the config's frame source
+        /// (no simulator, no actuator: the recorded actuator output is re-published); stops at
+        /// the end of the recording. In lockstep (the default) the decisions repeat the
+        /// recorded ones frame for frame.
+        #[arg(long, value_name = "FILE.mcap")]
+        replay: Option<PathBuf>,
+        /// Record the run to an MCAP file from before its first frame (what `hvs probe
+        /// record` records: both pairs, ranges, decisions, actuator output).
+        #[arg(long, value_name = "FILE.mcap")]
+        record: Option<PathBuf>,
     },
     /// Show the stages of a running pipeline: pid, state, restarts, rate, latency.
     Status {
@@ -395,6 +405,8 @@ fn main() -> ExitCode {
             instance,
             duration,
             report,
+            replay,
+            record,
         } => (|| {
             let config_path = resolve_config(config)?;
             let duration = duration.map(|d| seconds(d, "--duration")).transpose()?;
@@ -403,6 +415,8 @@ fn main() -> ExitCode {
                 instance,
                 duration,
                 report,
+                replay,
+                record,
             })
             .map(|_| ())
         })(),

@@ -109,6 +109,12 @@ pub enum ProbeCommand {
         /// Print the summary as JSON.
         #[arg(long)]
         json: bool,
+        /// Create the topics if no stage has yet (used by `hvs run --record`).
+        #[arg(long, hide = true)]
+        create_topics: bool,
+        /// Create this file once subscribed (used by `hvs run --record`).
+        #[arg(long, hide = true, value_name = "FILE")]
+        ready_file: Option<PathBuf>,
     },
 }
 
@@ -220,11 +226,15 @@ pub fn run(command: ProbeCommand) -> anyhow::Result<()> {
             topics,
             duration_s,
             json,
+            create_topics,
+            ready_file,
         } => {
             let opts = RecordOptions {
                 out: file,
                 topics,
                 duration: duration_s.map(|d| seconds(d, "--duration-s")).transpose()?,
+                create_topics,
+                ready_file,
             };
             let probe = Probe::attach(&target.instance()?)?;
             let summary = record::record(&probe, &opts, &mut std::io::stderr())?;

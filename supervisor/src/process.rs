@@ -56,16 +56,21 @@ pub fn spawn(launch: &Launch<'_>) -> Result<Child, SpawnError> {
         .arg(launch.instance)
         .arg("--stage")
         .arg(launch.stage)
-        .args(launch.extra_args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .process_group(0);
+        .args(launch.extra_args);
     if std::env::var_os("RUST_LOG").is_none() {
         cmd.env("RUST_LOG", launch.default_log_filter);
     }
+    spawn_child(launch.stage, cmd, launch.nice)
+}
+
+/// Spawns `cmd` as a child of the pipeline (own process group, SIGTERM when the supervisor
+/// dies, output forwarded with `name` in front).
+pub fn spawn_child(name: &str, mut cmd: Command, nice: i32) -> Result<Child, SpawnError> {
+    cmd.stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .process_group(0);
     let parent = std::process::id() as libc::pid_t;
-    let nice = launch.nice;
     // SAFETY: the closure runs in the child between fork and exec and only calls
     // async-signal-safe functions (prctl, setpriority, getppid, raise).
     unsafe {
@@ -85,15 +90,15 @@ pub fn spawn(launch: &Launch<'_>) -> Result<Child, SpawnError> {
         });
     }
     let mut child = cmd.spawn().map_err(|source| SpawnError {
-        stage: launch.stage.to_string(),
-        program: launch.program.to_path_buf(),
+        stage: name.to_string(),
+        program: PathBuf::from(cmd.get_program()),
         source,
     })?;
     if let Some(out) = child.stdout.take() {
-        forward(launch.stage.to_string(), out, false);
+        forward(name.to_string(), out, false);
     }
     if let Some(err) = child.stderr.take() {
-        forward(launch.stage.to_string(), err, true);
+        forward(name.to_string(), err, true);
     }
     Ok(child)
 }

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::{HvsConfig, RestartPolicy, StageSpec, run_dir};
+use hvs_shared::config::{CaptureSource, HvsConfig, RestartPolicy, StageSpec, run_dir};
 use hvs_shared::ipc::{IpcNode, TopicPublisher, TopicSubscriber};
 use hvs_shared::messages::{
     ActuatorReport, ControlCommand, Decision, MAX_STAGES, MotionCommand, NAME_LEN, SendReason,
@@ -48,6 +48,91 @@ pub struct RunOptions {
     pub duration: Option<Duration>,
     /// Write the JSON report here at the end.
     pub report: Option<PathBuf>,
+    /// Replay this recording instead of the config's frame source; stop at its end.
+    pub replay: Option<PathBuf>,
+    /// Record the run (`hvs probe record`'s default topics) from before the first frame.
+    pub record: Option<PathBuf>,
+}
+
+/// The MCAP magic every recording starts with.
+const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+
+/// Checks that `path` is there and starts like an MCAP file (the capture stage reads it).
+fn check_recording(path: &Path) -> anyhow::Result<PathBuf> {
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut head = [0u8; 8];
+    let mut file = File::open(&abs)
+        .with_context(|| format!("--replay {}: cannot open the recording", path.display()))?;
+    let n = std::io::Read::read(&mut file, &mut head)
+        .with_context(|| format!("--replay {}: cannot read the recording", path.display()))?;
+    if head[..n] != *MCAP_MAGIC {
+        bail!(
+            "--replay {}: not an MCAP file (it does not start with the MCAP magic); \
+             record one with `hvs run --record` or `hvs probe record`",
+            path.display()
+        );
+    }
+    Ok(abs)
+}
+
+/// The recorder child of `hvs run --record`: `hvs probe record` started before the stages.
+struct Recorder {
+    child: Child,
+    out: PathBuf,
+}
+
+impl Recorder {
+    /// Starts the recorder and waits until it has subscribed to every topic.
+    fn start(instance: &str, out: &Path) -> anyhow::Result<Self> {
+        let exe = std::env::current_exe().context("cannot locate the hvs executable")?;
+        let ready = run_dir(instance).join("recorder.ready");
+        let _ = std::fs::remove_file(&ready);
+        let mut cmd = std::process::Command::new(exe);
+        cmd.args(["probe", "record", "--instance", instance, "--create-topics"])
+            .arg("--out")
+            .arg(out)
+            .arg("--ready-file")
+            .arg(&ready);
+        let mut child = process::spawn_child("record", cmd, 0)?;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !ready.exists() {
+            if let Ok(Some(status)) = child.try_wait() {
+                bail!(
+                    "--record {}: the recorder exited before it started ({})",
+                    out.display(),
+                    describe_exit(process::exit_code(&status))
+                );
+            }
+            if Instant::now() > deadline {
+                process::terminate(&mut child, Duration::from_secs(1));
+                bail!(
+                    "--record {}: the recorder did not subscribe within 10 s",
+                    out.display()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = std::fs::remove_file(&ready);
+        tracing::info!("hvs: recording to {}", out.display());
+        Ok(Self {
+            child,
+            out: out.to_path_buf(),
+        })
+    }
+
+    /// Stops it (SIGTERM: it closes the file with its summary) after the stages stopped.
+    fn stop(mut self) {
+        match process::terminate(&mut self.child, Duration::from_secs(30)) {
+            Some(s) if s.success() => {}
+            status => tracing::warn!(
+                "hvs: the recorder of {} ended with {}",
+                self.out.display(),
+                status.map_or("no status".to_string(), |s| describe_exit(
+                    process::exit_code(&s)
+                ))
+            ),
+        }
+    }
 }
 
 /// Counters of a stage, summed over its incarnations.
@@ -179,6 +264,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
             .map_err(|m| anyhow::anyhow!("--instance {m}"))?;
         config.instance = instance.clone();
     }
+    let replay = opts.replay.as_deref().map(check_recording).transpose()?;
+    if let Some(file) = &replay {
+        config.use_replay(file)?;
+    }
     crate::preflight(&config)?;
     let config_path = std::fs::canonicalize(&opts.config_path)
         .with_context(|| format!("cannot resolve {}", opts.config_path.display()))?;
@@ -217,7 +306,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     let truth = node.subscriber(&topics::SIM_TRUTH, 1)?;
 
     let mut slots = Vec::new();
-    for spec in specs {
+    for mut spec in specs {
+        if let Some(file) = &replay {
+            spec.args.push("--replay".to_string());
+            spec.args.push(file.display().to_string());
+        }
         let heartbeat = node.stage_subscriber(&topics::HEARTBEAT, &spec.name, 4)?;
         let program = resolve_program(&bins, &spec.program);
         let state = if spec.enabled {
@@ -269,6 +362,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
         watchdog_neutral: 0,
         last_command: MotionCommand::Stop,
         last_truth: None,
+        replay_end: None,
     };
     tracing::info!(
         "hvs: instance {}, config {}, stages from {}",
@@ -276,6 +370,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
         sup.config_path.display(),
         bins.display()
     );
+    // The recorder first: the recording then holds the first frame and every actuator
+    // output, which a replay needs to repeat the decisions.
+    let recorder = opts
+        .record
+        .as_deref()
+        .map(|out| Recorder::start(&sup.instance, out))
+        .transpose()?;
     for i in 0..sup.slots.len() {
         if sup.slots[i].state == StageState::Stopped {
             sup.start(i);
@@ -313,6 +414,17 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
             stop_reason = "hvs stop";
             break;
         }
+        match sup.replay_end {
+            Some(ReplayEnd::Finished) => {
+                stop_reason = "replay finished";
+                break;
+            }
+            Some(ReplayEnd::Failed(_)) => {
+                stop_reason = "replay failed";
+                break;
+            }
+            None => {}
+        }
         sup.poll_heartbeats()?;
         sup.poll_children();
         sup.poll_pipeline(&decisions, &sent, &truth)?;
@@ -331,6 +443,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     // Collect what arrived during shutdown (the actuator's final neutral).
     sup.poll_pipeline(&decisions, &sent, &truth)?;
     sup.poll_heartbeats()?;
+    if let Some(recorder) = recorder {
+        recorder.stop();
+    }
     let report = sup.report();
     println!(
         "hvs: stopped after {:.1} s; capture-to-decision p50 {:.2} ms p99 {:.2} ms; restarts {}",
@@ -344,6 +459,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
         std::fs::write(path, json + "\n")
             .with_context(|| format!("cannot write report {}", path.display()))?;
         println!("hvs: report written to {}", path.display());
+    }
+    if let Some(ReplayEnd::Failed(code)) = sup.replay_end {
+        bail!(
+            "replay of {} failed: the capture stage ended with {} (its error is above)",
+            sup.config.capture.replay.file.display(),
+            describe_exit(code)
+        );
     }
     Ok(report)
 }
@@ -365,6 +487,17 @@ struct Supervisor {
     watchdog_neutral: u64,
     last_command: MotionCommand,
     last_truth: Option<SimTruth>,
+    /// The replaying capture stage ended.
+    replay_end: Option<ReplayEnd>,
+}
+
+/// How the capture stage of a replay ended.
+#[derive(Debug, Clone, Copy)]
+enum ReplayEnd {
+    /// At the end of the recording.
+    Finished,
+    /// With this exit code (its error is in the log).
+    Failed(i32),
 }
 
 impl Supervisor {
@@ -490,6 +623,25 @@ impl Supervisor {
                     );
                 } else {
                     tracing::info!("hvs: {} (pid {}) exited cleanly", slot.spec.name, slot.pid);
+                }
+                if slot.spec.name == "capture"
+                    && self.config.capture.source == CaptureSource::Replay
+                {
+                    // The end of the recording (the pipeline has decided on its last frame),
+                    // or a recording that cannot be read: played again from its start it
+                    // would repeat decisions, so the run ends either way.
+                    slot.state = if failed {
+                        StageState::Failed
+                    } else {
+                        StageState::Stopped
+                    };
+                    slot.pid = 0;
+                    self.replay_end = Some(if failed {
+                        ReplayEnd::Failed(code)
+                    } else {
+                        ReplayEnd::Finished
+                    });
+                    continue;
                 }
                 self.after_exit(i, failed);
                 continue;

@@ -7,7 +7,8 @@
 //! - [`pairing`]: matching two unsynchronised cameras' frames by kernel timestamp;
 //! - [`v4l2`]: the Minoru's two UVC devices (hand-written V4L2 ioctls);
 //! - [`files`]: a folder of left/right PNG pairs;
-//! - [`calib`]: OpenCV stereo calibration files and the rectification remap.
+//! - [`calib`]: OpenCV stereo calibration files and the rectification remap;
+//! - [`replay`]: an MCAP recording of the pipeline, played back.
 //!
 //! The sources and their settings are described in `docs/capture.md`.
 
@@ -17,6 +18,7 @@ pub mod calib;
 pub mod convert;
 pub mod files;
 pub mod pairing;
+pub mod replay;
 pub mod v4l2;
 
 pub use convert::{ConvertError, downscale_2x};

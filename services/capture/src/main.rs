@@ -10,6 +10,9 @@
 //!   camera drops off the USB bus.
 //! - `files`: a folder of PNG pairs at `capture.files.rate_hz`, or in lockstep with the
 //!   pipeline's range reports.
+//! - `replay` (`hvs run --replay run.mcap`): a recording's pairs with their recorded frame ids
+//!   and the recorded actuator output (for the decision's dead reckoning), in lockstep with the
+//!   pipeline's decisions so that the recorded decisions are repeated, or at a fixed rate.
 //!
 //! At a 320x240 capture size only `frames/320x240` is published.
 
@@ -19,6 +22,7 @@ use std::time::{Duration, Instant};
 use hvs_capture::calib::{StereoCalibration, StereoRectifier};
 use hvs_capture::downscale_2x;
 use hvs_capture::files::FileSource;
+use hvs_capture::replay::{ReplayEvent, ReplayFrame, ReplayIndex, ReplayPair};
 use hvs_capture::v4l2::{CameraMode, StereoCamera, StereoSpec};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::config::CaptureSource;
@@ -35,6 +39,7 @@ fn main() -> ExitCode {
         CaptureSource::Sim => run_sim_source(rt),
         CaptureSource::V4l2 => run_v4l2_source(rt),
         CaptureSource::Files => run_files_source(rt),
+        CaptureSource::Replay => run_replay_source(rt),
     })
 }
 
@@ -198,6 +203,7 @@ impl PairPublisher {
             height: height as u32,
             source: self.source as u32,
             reserved: 0,
+            replay_hi_frame_id: 0,
         }
     }
 
@@ -547,4 +553,254 @@ fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         }
         Ok(LoopControl::Continue)
     })
+}
+
+/// What a lockstep replay waits for before the next frame.
+#[derive(Debug, Clone, Copy)]
+struct ReplayWait {
+    frame_id: u64,
+    decision: bool,
+    hi_disparity: bool,
+    since: Instant,
+}
+
+/// Replay counters for the closing line.
+#[derive(Debug, Default)]
+struct ReplayCounts {
+    lo: u64,
+    hi: u64,
+    sent: u64,
+    timeouts: u64,
+}
+
+fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
+    let c = rt.config.capture.replay.clone();
+    let file = rt.config.resolve_path(&c.file);
+    rt.set_note("replay: indexing");
+    rt.beat();
+    let indexing = Instant::now();
+    let index = ReplayIndex::open(&file)?;
+    let s = index.summary().clone();
+    let lockstep = c.rate_hz <= 0.0;
+    tracing::info!(
+        "{}: source replay {} (indexed in {:.1} s): {} frames in the file, playing {} \
+         (320x240 {}, 640x480 {}) and {} actuator outputs; {}; {}",
+        rt.stage,
+        file.display(),
+        indexing.elapsed().as_secs_f64(),
+        s.frames_in_file,
+        s.steps,
+        s.lo_pairs,
+        s.hi_pairs,
+        s.actuator_sent,
+        if s.has_decisions {
+            format!("the {} recorded decisions' frames", s.decisions)
+        } else {
+            "no recorded decisions: every pair".to_string()
+        },
+        if lockstep {
+            "lockstep with the decisions".to_string()
+        } else {
+            format!("{} Hz", c.rate_hz)
+        }
+    );
+    if let Some(cause) = &s.truncated {
+        tracing::warn!(
+            "{}: {} breaks off ({cause}): playing the messages before the break",
+            rt.stage,
+            file.display()
+        );
+    }
+    if s.hi_missing > 0 || s.lo_missing > 0 {
+        tracing::warn!(
+            "{}: {} decided frames fused a 640x480 frame the file lacks and {} decided frames \
+             lack their 320x240 pair (lost while recording): those decisions cannot be repeated",
+            rt.stage,
+            s.hi_missing,
+            s.lo_missing
+        );
+    }
+    let mut lo = rt.node.publisher(&topics::FRAMES_LO)?;
+    let mut hi = rt.node.publisher(&topics::FRAMES_HI)?;
+    let mut sent = rt.node.publisher(&topics::ACTUATOR_SENT)?;
+    let decisions = rt.node.subscriber(&topics::DECISIONS, 4)?;
+    let disparity_hi = rt.node.subscriber(&topics::DISPARITY_HI, 1)?;
+    // Recorded times move to now (one offset: every interval stays as recorded).
+    let offset_ns = monotonic_ns() as i128 - index.start_ns() as i128;
+    let rebase = move |t: u64| {
+        if t == 0 {
+            0
+        } else {
+            (t as i128 + offset_ns).max(0) as u64
+        }
+    };
+    let mut reader = index.reader()?;
+
+    let waitset = rt.waitset()?;
+    let decisions_guard = waitset
+        .attach_notification(decisions.listener())
+        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let hi_guard = waitset
+        .attach_notification(disparity_hi.listener())
+        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let period = if lockstep {
+        Duration::from_millis(10)
+    } else {
+        Duration::from_secs_f64(1.0 / c.rate_hz)
+    };
+    let tick = waitset
+        .attach_interval(period)
+        .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+    let timeout = Duration::from_millis(c.lockstep_timeout_ms);
+    let (mut last_decision, mut last_hi) = (0u64, 0u64);
+    let mut wait: Option<ReplayWait> = None;
+    let mut counts = ReplayCounts::default();
+    let started = Instant::now();
+    rt.set_note(format!("replay {} frames", s.steps));
+
+    rt.run_loop(&waitset, |rt, id| {
+        if id.has_event_from(&decisions_guard) {
+            decisions.clear_events();
+            while let Some(d) = decisions.receive()? {
+                last_decision = last_decision.max(d.payload().frame_id);
+            }
+        }
+        if id.has_event_from(&hi_guard) {
+            disparity_hi.clear_events();
+            while let Some(m) = disparity_hi.receive()? {
+                last_hi = last_hi.max(m.payload().header.frame_id);
+            }
+        }
+        if let Some(w) = wait {
+            let done = (!w.decision || last_decision >= w.frame_id)
+                && (!w.hi_disparity || last_hi >= w.frame_id);
+            if done {
+                wait = None;
+            } else if w.since.elapsed() >= timeout {
+                counts.timeouts += 1;
+                rt.report_error(
+                    "replay",
+                    &format!(
+                        "no {} for frame {} within {} ms (capture.replay.lockstep_timeout_ms); \
+                         going on",
+                        if w.decision && last_decision < w.frame_id {
+                            "decision"
+                        } else {
+                            "640x480 disparity"
+                        },
+                        w.frame_id,
+                        timeout.as_millis()
+                    ),
+                );
+                wait = None;
+            } else {
+                return Ok(LoopControl::Continue);
+            }
+        }
+        // Lockstep: go on whenever nothing is awaited; at a rate: one frame per tick.
+        if !lockstep && !id.has_event_from(&tick) {
+            return Ok(LoopControl::Continue);
+        }
+        loop {
+            let Some(event) = reader.next_event()? else {
+                tracing::info!(
+                    "{}: replay finished in {:.1} s: {} 320x240 and {} 640x480 pairs, {} \
+                     actuator outputs, {} lockstep timeouts",
+                    rt.stage,
+                    started.elapsed().as_secs_f64(),
+                    counts.lo,
+                    counts.hi,
+                    counts.sent,
+                    counts.timeouts
+                );
+                rt.set_note("replay finished");
+                return Ok(LoopControl::Stop);
+            };
+            match event {
+                ReplayEvent::Sent(mut r) => {
+                    r.sent_ns = rebase(r.sent_ns);
+                    r.decision_capture_ns = rebase(r.decision_capture_ns);
+                    r.decision_published_ns = rebase(r.decision_published_ns);
+                    match sent.publish_copy(&r) {
+                        Ok(_) => counts.sent += 1,
+                        Err(e) => rt.report_publish_error(&e),
+                    }
+                }
+                ReplayEvent::Frame(frame) => {
+                    let received_ns = monotonic_ns();
+                    rt.count_in(1);
+                    let ReplayFrame {
+                        step,
+                        lo: lo_pair,
+                        hi: hi_pair,
+                    } = *frame;
+                    // The long-range pair first: the fast path's fusion may name it.
+                    if let Some(pair) = hi_pair {
+                        publish_replayed(rt, &mut hi, &pair, rebase, received_ns, false);
+                        counts.hi += 1;
+                    }
+                    if let Some(pair) = lo_pair {
+                        publish_replayed(rt, &mut lo, &pair, rebase, received_ns, true);
+                        counts.lo += 1;
+                    }
+                    if lockstep {
+                        wait = Some(ReplayWait {
+                            frame_id: step.frame_id,
+                            decision: step.lo,
+                            hi_disparity: step.wait_for_hi,
+                            since: Instant::now(),
+                        });
+                    }
+                    return Ok(LoopControl::Continue);
+                }
+            }
+        }
+    })
+}
+
+/// Copies one recorded pair into a loaned sample and sends it (`counted`: the fast-path pair,
+/// whose latency the stage reports).
+fn publish_replayed<T>(
+    rt: &mut StageRuntime,
+    publisher: &mut TopicPublisher<T>,
+    pair: &ReplayPair,
+    rebase: impl Fn(u64) -> u64,
+    received_ns: u64,
+    counted: bool,
+) where
+    T: std::fmt::Debug
+        + iceoryx2::prelude::ZeroCopySend
+        + hvs_shared::messages::StereoPayload
+        + 'static,
+{
+    let mut sample = match publisher.loan() {
+        Ok(s) => s,
+        Err(e) => {
+            rt.report_publish_error(&e);
+            return;
+        }
+    };
+    let out = sample.payload_mut();
+    let (header, left, right) = out.parts_mut();
+    if left.len() != pair.left.len() || right.len() != pair.right.len() {
+        rt.report_error(
+            "replay",
+            &format!("frame {}: image size mismatch", pair.header.frame_id),
+        );
+        return;
+    }
+    left.copy_from_slice(&pair.left);
+    right.copy_from_slice(&pair.right);
+    *header = FrameHeader {
+        capture_ns: rebase(pair.header.capture_ns),
+        left_capture_ns: rebase(pair.header.left_capture_ns),
+        right_capture_ns: rebase(pair.header.right_capture_ns),
+        published_ns: monotonic_ns(),
+        ..pair.header
+    };
+    if counted {
+        rt.send_or_report(publisher, sample, monotonic_ns() - received_ns);
+    } else if let Err(e) = publisher.send(sample) {
+        rt.report_publish_error(&e);
+    }
 }

@@ -1,16 +1,25 @@
 //! Decision stage process: one decision per range report, published for the actuator.
+//!
+//! The decision's clock is the frame's capture time, and the actuator output it dead-reckons
+//! from is what was on the wire by then (later outputs wait for a later frame): the pose then
+//! belongs to the view, and the same frames and outputs give the same decisions whatever the
+//! processing delays (a replay repeats the recorded decisions).
 
+use std::collections::VecDeque;
 use std::process::ExitCode;
 
 use hvs_decision::{Navigator, Policy};
 use hvs_shared::clock::monotonic_ns;
-use hvs_shared::messages::Decision;
+use hvs_shared::messages::{ActuatorReport, Decision};
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 
 fn main() -> ExitCode {
     run_stage("decision", run)
 }
+
+/// Actuator outputs kept until a frame captured after them (15 a second: seconds of them).
+const SENT_KEPT: usize = 64;
 
 fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let ranges = rt.node.subscriber(&topics::RANGES, 2)?;
@@ -35,23 +44,39 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let guard = waitset
         .attach_notification(ranges.listener())
         .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let sent_guard = waitset
+        .attach_notification(sent.listener())
+        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let mut pending_sent: VecDeque<ActuatorReport> = VecDeque::new();
     rt.run_loop(&waitset, |rt, id| {
+        if id.has_event_from(&sent_guard) || id.has_event_from(&guard) {
+            sent.clear_events();
+            while let Some(report) = sent.receive()? {
+                if pending_sent.len() == SENT_KEPT {
+                    // Only without frames for seconds: the oldest output is applied late
+                    // rather than lost.
+                    if let Some(a) = pending_sent.pop_front() {
+                        nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.bytes[4]);
+                    }
+                }
+                pending_sent.push_back(*report.payload());
+            }
+        }
         if !id.has_event_from(&guard) {
             return Ok(LoopControl::Continue);
         }
         ranges.clear_events();
-        sent.clear_events();
-        while let Some(report) = sent.receive()? {
-            let a = report.payload();
-            // Byte 4 of a PSC position command is its ramp.
-            nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.bytes[4]);
-        }
         while let Some(report) = ranges.receive()? {
             let received_ns = monotonic_ns();
             rt.count_in(1);
             rt.set_drops(ranges.dropped());
             let r = report.payload();
-            let d = nav.decide(&r.windows, r.window_count as usize, &r.scan, received_ns);
+            while let Some(a) = pending_sent.front().filter(|a| a.sent_ns <= r.capture_ns) {
+                // Byte 4 of a PSC position command is its ramp.
+                nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.bytes[4]);
+                pending_sent.pop_front();
+            }
+            let d = nav.decide(&r.windows, r.window_count as usize, &r.scan, r.capture_ns);
             let decision = Decision {
                 frame_id: r.frame_id,
                 capture_ns: r.capture_ns,

@@ -1,7 +1,8 @@
 //! Fusion stage process: pairs each disparity map with its left image (held zero-copy in
 //! shared memory until the map arrives), detects edges, keeps disparity at edges, and publishes
 //! ranges per window for every fast-path frame, filling windows the fast path cannot see from
-//! a fresh long-range result.
+//! a fresh long-range result (in a replay: the long-range result the recorded run fused,
+//! named in the frame header, so the replay does not depend on timing).
 
 use std::collections::VecDeque;
 use std::process::ExitCode;
@@ -10,14 +11,17 @@ use hvs_fusion::{FusionPath, merge_scans, merge_windows};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::ipc::{ReceivedSample, TopicSubscriber};
 use hvs_shared::messages::{
-    MAX_RANGE_WINDOWS, ObstacleScan, RangeReport, RangeSource, RangeWindow, Sequenced,
-    StereoFrame320x240, StereoFrame640x480,
+    DisparityMap640x480, MAX_RANGE_WINDOWS, NO_HI_FRAME, ObstacleScan, RangeReport, RangeSource,
+    RangeWindow, Sequenced, StereoFrame320x240, StereoFrame640x480,
 };
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 
 /// Frames kept waiting for their disparity map (the topic allows 5 borrowed samples).
 const HELD_FRAMES: usize = 3;
+
+/// Long-range results kept for a replay naming an earlier one than the latest.
+const HI_RESULTS_KEPT: usize = 8;
 
 fn main() -> ExitCode {
     run_stage("fusion", run)
@@ -49,20 +53,69 @@ where
     Ok(())
 }
 
+/// The long-range side: pairs the newest 640x480 disparity map with its held frame.
+struct HiSide {
+    frames: TopicSubscriber<StereoFrame640x480>,
+    held: VecDeque<ReceivedSample<StereoFrame640x480>>,
+    path: FusionPath,
+    /// The newest results, oldest first.
+    results: VecDeque<HiRanges>,
+    unpaired: u64,
+}
+
+impl HiSide {
+    /// Computes the ranges of the newest map, if one arrived.
+    fn take_maps(&mut self, maps: &TopicSubscriber<DisparityMap640x480>) -> Result<(), StageError> {
+        maps.clear_events();
+        hold_frames(&self.frames, &mut self.held)?;
+        let Some(map) = maps.receive_latest()? else {
+            return Ok(());
+        };
+        let m = map.payload();
+        let Some(frame) = self
+            .held
+            .iter()
+            .find(|f| f.payload().header.frame_id == m.header.frame_id)
+        else {
+            self.unpaired += 1;
+            return Ok(());
+        };
+        let (windows, _, _) = self.path.ranges(&frame.payload().left, &m.disparity_q8);
+        if self.results.len() == HI_RESULTS_KEPT {
+            self.results.pop_front();
+        }
+        self.results.push_back(HiRanges {
+            frame_id: m.header.frame_id,
+            capture_ns: m.header.capture_ns,
+            windows,
+            scan: *self.path.scan(),
+        });
+        Ok(())
+    }
+
+    fn find(&self, frame_id: u64) -> Option<&HiRanges> {
+        self.results.iter().rev().find(|h| h.frame_id == frame_id)
+    }
+}
+
 fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let frames_lo = rt.node.subscriber(&topics::FRAMES_LO, 2)?;
-    let frames_hi = rt.node.subscriber(&topics::FRAMES_HI, 2)?;
     let disp_lo = rt.node.subscriber(&topics::DISPARITY_LO, 2)?;
     let disp_hi = rt.node.subscriber(&topics::DISPARITY_HI, 1)?;
+    let mut hi = HiSide {
+        frames: rt.node.subscriber(&topics::FRAMES_HI, 2)?,
+        held: VecDeque::new(),
+        path: FusionPath::new(&rt.config, 640, 480, RangeSource::Hi),
+        results: VecDeque::new(),
+        unpaired: 0,
+    };
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
     let mut held_lo: VecDeque<ReceivedSample<StereoFrame320x240>> = VecDeque::new();
-    let mut held_hi: VecDeque<ReceivedSample<StereoFrame640x480>> = VecDeque::new();
     let mut lo_path = FusionPath::new(&rt.config, 320, 240, RangeSource::Lo);
-    let mut hi_path = FusionPath::new(&rt.config, 640, 480, RangeSource::Hi);
-    let mut latest_hi: Option<HiRanges> = None;
     let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
     let min_valid_px = rt.config.fusion.min_valid_px;
     let mut unpaired = 0u64;
+    let mut replay_missed = 0u64;
     rt.set_note(format!("{} windows", rt.config.fusion.windows));
 
     let waitset = rt.waitset()?;
@@ -75,27 +128,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
 
     rt.run_loop(&waitset, |rt, id| {
         if id.has_event_from(&hi_guard) {
-            disp_hi.clear_events();
-            hold_frames(&frames_hi, &mut held_hi)?;
-            if let Some(map) = disp_hi.receive_latest()? {
-                let m = map.payload();
-                match held_hi
-                    .iter()
-                    .find(|f| f.payload().header.frame_id == m.header.frame_id)
-                {
-                    Some(frame) => {
-                        let (windows, _, _) =
-                            hi_path.ranges(&frame.payload().left, &m.disparity_q8);
-                        latest_hi = Some(HiRanges {
-                            frame_id: m.header.frame_id,
-                            capture_ns: m.header.capture_ns,
-                            windows,
-                            scan: *hi_path.scan(),
-                        });
-                    }
-                    None => unpaired += 1,
-                }
-            }
+            hi.take_maps(&disp_hi)?;
         }
         if id.has_event_from(&lo_guard) {
             disp_lo.clear_events();
@@ -103,7 +136,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             while let Some(map) = disp_lo.receive()? {
                 let received_ns = monotonic_ns();
                 rt.count_in(1);
-                rt.set_drops(disp_lo.dropped() + unpaired);
+                rt.set_drops(disp_lo.dropped() + unpaired + hi.unpaired);
                 let m = map.payload();
                 let Some(frame) = held_lo
                     .iter()
@@ -114,9 +147,31 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 };
                 let (lo_windows, edge_px, valid_edge_px) =
                     lo_path.ranges(&frame.payload().left, &m.disparity_q8);
-                let hi = latest_hi
-                    .as_ref()
-                    .filter(|h| m.header.capture_ns.saturating_sub(h.capture_ns) <= hi_max_age_ns);
+                let hi_ranges = match frame.payload().header.replay_hi_frame_id {
+                    0 => hi.results.back().filter(|h| {
+                        m.header.capture_ns.saturating_sub(h.capture_ns) <= hi_max_age_ns
+                    }),
+                    NO_HI_FRAME => None,
+                    named => {
+                        if hi.find(named).is_none() {
+                            // Its map may be waiting behind this one.
+                            hi.take_maps(&disp_hi)?;
+                        }
+                        let found = hi.find(named);
+                        if found.is_none() {
+                            replay_missed += 1;
+                            rt.report_error(
+                                "replay",
+                                &format!(
+                                    "frame {}: the recorded 640x480 result of frame {named} \
+                                     is not here ({replay_missed} so far); fused without it",
+                                    m.header.frame_id
+                                ),
+                            );
+                        }
+                        found
+                    }
+                };
                 let mut sample = match ranges.loan() {
                     Ok(s) => s,
                     Err(e) => {
@@ -128,14 +183,19 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     frame_id: m.header.frame_id,
                     capture_ns: m.header.capture_ns,
                     published_ns: monotonic_ns(),
-                    hi_frame_id: hi.map_or(0, |h| h.frame_id),
-                    hi_age_ns: hi.map_or(0, |h| m.header.capture_ns.saturating_sub(h.capture_ns)),
+                    hi_frame_id: hi_ranges.map_or(0, |h| h.frame_id),
+                    hi_age_ns: hi_ranges
+                        .map_or(0, |h| m.header.capture_ns.saturating_sub(h.capture_ns)),
                     window_count: rt.config.fusion.windows,
                     edge_px,
-                    windows: merge_windows(&lo_windows, hi.map(|h| &h.windows), min_valid_px),
+                    windows: merge_windows(
+                        &lo_windows,
+                        hi_ranges.map(|h| &h.windows),
+                        min_valid_px,
+                    ),
                     valid_edge_px,
                     reserved: 0,
-                    scan: merge_scans(lo_path.scan(), hi.map(|h| &h.scan)),
+                    scan: merge_scans(lo_path.scan(), hi_ranges.map(|h| &h.scan)),
                 };
                 rt.send_or_report(&mut ranges, sample, monotonic_ns() - received_ns);
             }

@@ -70,6 +70,8 @@ fn frame_json(h: &FrameHeader) -> Value {
         "height": h.height,
         "source": source_label(h.source),
         "capture_ns": h.capture_ns,
+        "left_capture_ns": h.left_capture_ns,
+        "right_capture_ns": h.right_capture_ns,
         "published_ns": h.published_ns,
         "skew_ns": h.skew_ns,
         "capture_to_publish_ms": span_ms(h.capture_ns, h.published_ns),
@@ -253,14 +255,7 @@ impl Describe for Decision {
 }
 
 fn reason_label(code: u32) -> &'static str {
-    match SendReason::from_code(code) {
-        Some(SendReason::Decision) => "decision",
-        Some(SendReason::WatchdogNeutral) => "watchdog-neutral",
-        Some(SendReason::ShutdownNeutral) => "shutdown-neutral",
-        Some(SendReason::ErrorNeutral) => "error-neutral",
-        Some(SendReason::StartupNeutral) => "startup-neutral",
-        None => "?",
-    }
+    SendReason::from_code(code).map_or("?", SendReason::label)
 }
 
 /// Bytes as printable text: ASCII graphic characters as themselves, others as `\xNN`.
@@ -316,6 +311,8 @@ impl Describe for ActuatorReport {
             "left_pw": self.left_pw,
             "right_pw": self.right_pw,
             "decision_frame_id": self.decision_frame_id,
+            "decision_capture_ns": self.decision_capture_ns,
+            "decision_published_ns": self.decision_published_ns,
             "sent_ns": self.sent_ns,
             "capture_to_sent_ms": span_ms(self.decision_capture_ns, self.sent_ns),
             "bytes_hex": hex_bytes(sent_bytes(self)),

@@ -60,6 +60,11 @@ pub struct RecordOptions {
     pub topics: Vec<String>,
     /// Stop after this long (`None`: until interrupted).
     pub duration: Option<Duration>,
+    /// Create the topics if the pipeline has not yet (`hvs run --record` starts the recorder
+    /// before the stages, so the recording holds the first frame and every actuator output).
+    pub create_topics: bool,
+    /// Created once every topic is subscribed (`hvs run --record` waits for it).
+    pub ready_file: Option<PathBuf>,
 }
 
 /// What a recording holds, per topic.
@@ -309,9 +314,21 @@ fn open_source<T: Recordable>(
     probe: &Probe,
     path: &str,
     writer: &mut mcap::Writer<CountingFile>,
+    create_topics: bool,
     create: &dyn Fn(String) -> RecordError,
 ) -> Result<Box<dyn Source>, RecordError> {
-    let sub = probe.subscribe(topic, None, path, topic.max_buffer)?;
+    let sub = if create_topics {
+        probe
+            .node
+            .subscriber(topic, topic.max_buffer)
+            .map_err(|source| AttachError::Subscribe {
+                instance: probe.instance().to_string(),
+                topic: path.to_string(),
+                source,
+            })?
+    } else {
+        probe.subscribe(topic, None, path, topic.max_buffer)?
+    };
     let no_meta = BTreeMap::new();
     let mcap_err = |e: mcap::McapError| create(e.to_string());
     let channels = if T::STEREO {
@@ -400,17 +417,35 @@ pub fn record(
     let mut sources = Vec::new();
     for (path, by) in resolved {
         let source = match by {
-            TopicByPath::StereoFrame320x240(t) => open_source(t, probe, path, &mut writer, &create),
-            TopicByPath::StereoFrame640x480(t) => open_source(t, probe, path, &mut writer, &create),
-            TopicByPath::RangeReport(t) => open_source(t, probe, path, &mut writer, &create),
-            TopicByPath::Decision(t) => open_source(t, probe, path, &mut writer, &create),
-            TopicByPath::ActuatorReport(t) => open_source(t, probe, path, &mut writer, &create),
+            TopicByPath::StereoFrame320x240(t) => {
+                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
+            }
+            TopicByPath::StereoFrame640x480(t) => {
+                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
+            }
+            TopicByPath::RangeReport(t) => {
+                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
+            }
+            TopicByPath::Decision(t) => {
+                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
+            }
+            TopicByPath::ActuatorReport(t) => {
+                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
+            }
             _ => Err(not_recordable(path)),
         };
         sources.push(source?);
     }
     // The header and channels on disk first: a recording cut short keeps them.
     writer.flush().map_err(|e| create(e.to_string()))?;
+    if let Some(ready) = &opts.ready_file {
+        std::fs::write(ready, b"").map_err(|e| {
+            create(format!(
+                "cannot create the ready file {}: {e}",
+                ready.display()
+            ))
+        })?;
+    }
     let mut good_len = pos.load(Ordering::Relaxed);
     let mut sink = Sink {
         writer,
@@ -425,10 +460,12 @@ pub fn record(
     let start = Instant::now();
     let mut last_flush = Instant::now();
     let mut cut_short: Option<String> = None;
+    let mut interrupted = false;
     'record: loop {
-        if opts.duration.is_some_and(|d| start.elapsed() >= d) || probe.termination_requested() {
-            break;
-        }
+        // One more pass after the end is asked for: what was published before it is kept.
+        let ending = interrupted
+            || opts.duration.is_some_and(|d| start.elapsed() >= d)
+            || probe.termination_requested();
         let mut got = 0;
         for source in &mut sources {
             match source.drain(&mut sink) {
@@ -469,8 +506,12 @@ pub fn record(
                 counts.values().map(|c| c.dropped).sum::<u64>(),
             );
         }
-        if got == 0 && !probe.node.sleep(Duration::from_millis(2)) {
+        if ending {
             break;
+        }
+        if got == 0 && !probe.node.sleep(Duration::from_millis(2)) {
+            // Interrupted (the node reports a signal once): the next pass is the last.
+            interrupted = true;
         }
     }
     let duration_s = start.elapsed().as_secs_f64();

@@ -113,6 +113,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             height: HI_HEIGHT as u32,
             source: FrameSource::Simulator as u32,
             reserved: 0,
+            replay_hi_frame_id: 0,
         };
         rt.send_or_report(&mut camera, sample, monotonic_ns() - capture_ns);
         if let Err(e) = gt_disparity.send(gt) {
