@@ -249,11 +249,19 @@ fn open_messages(path: &Path) -> Result<mcap::io::MessageReader<BufReader<File>>
         path: path.to_path_buf(),
         source,
     })?;
-    Ok(mcap::io::MessageReader::new(BufReader::with_capacity(
-        1 << 20,
-        file,
-    )))
+    // A damaged length field must give an error, not a huge allocation (found by the
+    // generated bad input of tests/tests/bad_input.rs).
+    let options =
+        mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES);
+    Ok(mcap::io::MessageReader::new_with_options(
+        BufReader::with_capacity(1 << 20, file),
+        options,
+    ))
 }
+
+/// Longest MCAP record accepted: the recorder's chunks are about 4 MiB (a 640x480 image
+/// message is 0.4 MB), so 64 MiB is far above anything it writes.
+const MAX_RECORD_BYTES: usize = 64 << 20;
 
 fn mcap_error(path: &Path, e: mcap::McapError) -> ReplayError {
     ReplayError::Mcap {
@@ -269,6 +277,24 @@ fn side_bit(topic: &str) -> u8 {
 impl ReplayIndex {
     /// Reads the file once (everything but the pixels) and plans the replay.
     pub fn open(path: &Path) -> Result<Self, ReplayError> {
+        let mut head = [0u8; 8];
+        let n = std::io::Read::read(
+            &mut File::open(path).map_err(|source| ReplayError::Open {
+                path: path.to_path_buf(),
+                source,
+            })?,
+            &mut head,
+        )
+        .map_err(|source| ReplayError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        if head[..n] != *mcap::MAGIC {
+            return Err(ReplayError::Mcap {
+                path: path.to_path_buf(),
+                detail: "it does not start with the MCAP magic".to_string(),
+            });
+        }
         let mut frames: BTreeMap<u64, FrameEntry> = BTreeMap::new();
         let mut sent = Vec::new();
         let mut channels: BTreeMap<String, u64> = BTreeMap::new();
