@@ -24,10 +24,10 @@ use serde::{Deserialize, Serialize};
 /// Frame sizes the benchmark knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 pub enum FrameSize {
-    /// 320x240 pair (153 664 bytes).
+    /// 320x240 pair (153 672 bytes).
     #[value(name = "320x240")]
     Lo,
-    /// 640x480 pair (614 464 bytes).
+    /// 640x480 pair (614 472 bytes).
     #[value(name = "640x480")]
     Hi,
 }
@@ -353,20 +353,27 @@ pub fn run_pipeline(config: PathBuf, duration: Duration) -> anyhow::Result<()> {
     println!();
     println!("pipeline over {:.1} s", report.duration_s);
     println!(
-        "{:<10} {:>9} {:>9} {:>9} {:>8} {:>8}",
-        "stage", "in", "out", "out Hz", "drops", "restarts"
+        "{:<10} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>9}",
+        "stage", "in", "out", "out Hz", "drops", "restarts", "cpu %", "rss MiB"
     );
     for s in &report.stages {
         println!(
-            "{:<10} {:>9} {:>9} {:>9.1} {:>8} {:>8}",
+            "{:<10} {:>9} {:>9} {:>9.1} {:>8} {:>8} {:>8.1} {:>9.1}",
             s.stage,
             s.frames_in,
             s.frames_out,
             s.frames_out as f64 / secs,
             s.drops,
-            s.restarts
+            s.restarts,
+            s.cpu_pct,
+            s.rss_max_mib
         );
     }
+    let cpu: f64 = report.stages.iter().map(|s| s.cpu_pct).sum();
+    println!(
+        "all stages: {cpu:.0} % of one core ({} cores here)",
+        cores()
+    );
     let l = &report.latency;
     println!(
         "{:<22} {:>7} {:>9} {:>9} {:>9}",
@@ -381,5 +388,41 @@ pub fn run_pipeline(config: PathBuf, duration: Duration) -> anyhow::Result<()> {
             name, v.count, v.p50_ms, v.p99_ms, v.max_ms
         );
     }
+    print_targets(&report, secs);
     Ok(())
+}
+
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+fn stage_out(report: &crate::report::RunReport, stage: &str) -> u64 {
+    report
+        .stages
+        .iter()
+        .find(|s| s.stage == stage)
+        .map_or(0, |s| s.frames_out)
+}
+
+/// The pipeline targets of docs/performance.md, each with its measured value.
+fn print_targets(report: &crate::report::RunReport, secs: f64) {
+    let captured = stage_out(report, "capture");
+    let decided = stage_out(report, "decision");
+    let hi_hz = stage_out(report, "stereo-hi") as f64 / secs;
+    let p99 = report.latency.capture_to_decision.p99_ms;
+    let verdict = |ok: bool| if ok { "met" } else { "NOT met" };
+    println!("targets");
+    println!(
+        "  every 320x240 frame decided:  {decided} decisions for {captured} pairs ({:.2} %)  {}",
+        100.0 * decided as f64 / captured.max(1) as f64,
+        verdict(captured > 0 && decided + 1 >= captured)
+    );
+    println!(
+        "  capture->decision p99 < 33 ms: {p99:.2} ms  {}",
+        verdict(p99 > 0.0 && p99 < 33.0)
+    );
+    println!(
+        "  640x480 worker >= 10 Hz:       {hi_hz:.1} Hz  {}",
+        verdict(hi_hz >= 10.0)
+    );
 }

@@ -6,8 +6,10 @@ mod control;
 mod drive;
 mod probe_cli;
 mod process;
+mod procstat;
 mod report;
 mod run;
+mod soak;
 mod stereo_cli;
 
 use std::path::{Path, PathBuf};
@@ -241,6 +243,23 @@ enum BenchCommand {
         /// How long to run, seconds.
         #[arg(long, default_value_t = 20.0)]
         duration: f64,
+    },
+    /// Soak: the simulated pipeline for a long time with a probe attaching and detaching
+    /// every few seconds; prints per-stage memory and descriptors at the start and the end,
+    /// shared-memory files during and after, restarts and watchdog neutrals.
+    Soak {
+        /// Pipeline configuration (default: config/sim.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// How long to watch after the warm-up, seconds.
+        #[arg(long, default_value_t = 1800.0)]
+        duration: f64,
+        /// A probe attaches this often, seconds.
+        #[arg(long, default_value_t = 3.0)]
+        probe_every: f64,
+        /// Readings start after this long, seconds.
+        #[arg(long, default_value_t = 15.0)]
+        warm_up: f64,
     },
     /// Time per frame of the fusion stage (edges, fused map, windows) and the decision stage
     /// at 320x240 and 640x480 on a rendered simulator pair.
@@ -533,6 +552,19 @@ fn main() -> ExitCode {
             BenchCommand::Stages { config, frames } => (|| {
                 let config = resolve_config(config)?;
                 bench_stages::run(&config, frames)
+            })(),
+            BenchCommand::Soak {
+                config,
+                duration,
+                probe_every,
+                warm_up,
+            } => (|| {
+                soak::run(&soak::SoakOptions {
+                    config: resolve_config(config)?,
+                    duration: seconds(duration, "--duration")?,
+                    probe_every: seconds(probe_every, "--probe-every")?,
+                    warm_up: seconds(warm_up, "--warm-up")?,
+                })
             })(),
             BenchCommand::Pipeline { config, duration } => (|| {
                 let config = resolve_config(config)?;

@@ -56,6 +56,14 @@ pub struct StageReport {
     pub restarts: u32,
     /// Last exit status (negative: killed by that signal).
     pub last_exit: i32,
+    /// CPU time used (user + system, every incarnation), seconds.
+    pub cpu_s: f64,
+    /// `cpu_s` over the run's duration, percent of one core.
+    pub cpu_pct: f64,
+    /// Resident memory at the last reading, MiB.
+    pub rss_mib: f64,
+    /// Largest resident memory read, MiB.
+    pub rss_max_mib: f64,
 }
 
 /// The simulator's ground truth at the end.

@@ -27,6 +27,10 @@ use hvs_shared::topics;
 use nix::sys::signal::Signal;
 
 use crate::process::{self, Launch};
+use crate::procstat::{self, ProcSample};
+
+/// Bytes in a MiB.
+const MIB: f64 = 1024.0 * 1024.0;
 use crate::report::{LatencyReport, RunReport, SimReport, StageReport};
 
 /// Supervisor loop period.
@@ -189,11 +193,20 @@ struct Slot {
     rate_hz: f64,
     latency_p50_ns: u64,
     latency_p99_ns: u64,
+    /// CPU seconds of earlier incarnations.
+    cpu_s_past: f64,
+    /// The current process's last reading.
+    proc_now: Option<ProcSample>,
+    rss_max_bytes: u64,
 }
 
 impl Slot {
     fn totals(&self) -> Counters {
         self.past.plus(self.current)
+    }
+
+    fn cpu_s(&self) -> f64 {
+        self.cpu_s_past + self.proc_now.map_or(0.0, |s| s.cpu_s)
     }
 }
 
@@ -342,6 +355,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
             rate_hz: 0.0,
             latency_p50_ns: 0,
             latency_p99_ns: 0,
+            cpu_s_past: 0.0,
+            proc_now: None,
+            rss_max_bytes: 0,
         });
     }
 
@@ -439,6 +455,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     }
     tracing::info!("hvs: stopping ({stop_reason})");
     sup.publish_status(&mut status_pub, true);
+    // The last CPU and memory readings, while the stages still run.
+    sup.sample_processes();
     sup.shutdown();
     // Collect what arrived during shutdown (the actuator's final neutral).
     sup.poll_pipeline(&decisions, &sent, &truth)?;
@@ -698,6 +716,7 @@ impl Supervisor {
         slot.current = Counters::default();
         let ran_for = slot.spawned_at.elapsed();
         slot.pid = 0;
+        slot.cpu_s_past += slot.proc_now.take().map_or(0.0, |s| s.cpu_s);
         if slot.restart_requested {
             slot.restart_requested = false;
             slot.restarts += 1;
@@ -795,7 +814,21 @@ impl Supervisor {
         Ok(())
     }
 
+    /// Reads every stage process's CPU time and memory.
+    fn sample_processes(&mut self) {
+        for slot in &mut self.slots {
+            if slot.pid == 0 {
+                continue;
+            }
+            if let Some(s) = procstat::sample(slot.pid) {
+                slot.rss_max_bytes = slot.rss_max_bytes.max(s.rss_bytes);
+                slot.proc_now = Some(s);
+            }
+        }
+    }
+
     fn update_rates(&mut self, secs: f64) {
+        self.sample_processes();
         for slot in &mut self.slots {
             let out = slot.totals().frames_out;
             slot.rate_hz = out.saturating_sub(slot.rate_base) as f64 / secs;
@@ -928,6 +961,7 @@ impl Supervisor {
     }
 
     fn report(&mut self) -> RunReport {
+        let duration_s = self.started.elapsed().as_secs_f64();
         let stages = self
             .slots
             .iter()
@@ -942,13 +976,17 @@ impl Supervisor {
                     errors: t.errors,
                     restarts: s.restarts,
                     last_exit: s.last_exit,
+                    cpu_s: s.cpu_s(),
+                    cpu_pct: 100.0 * s.cpu_s() / duration_s.max(1e-3),
+                    rss_mib: s.proc_now.map_or(0.0, |p| p.rss_bytes as f64 / MIB),
+                    rss_max_mib: s.rss_max_bytes as f64 / MIB,
                 }
             })
             .collect();
         RunReport {
             instance: self.instance.clone(),
             config: self.config_path.display().to_string(),
-            duration_s: self.started.elapsed().as_secs_f64(),
+            duration_s,
             stages,
             decisions: self.decisions_seen,
             commands_sent: self.commands_sent,
