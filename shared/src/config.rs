@@ -860,6 +860,10 @@ pub struct StageOverride {
     /// CPU niceness of the process (-20..=19; higher = lower priority). The 640x480 worker
     /// defaults to 10 so that it only uses what the fast path leaves.
     pub nice: Option<i32>,
+    /// A stage silent this long is declared hung and restarted, ms (default
+    /// `supervisor.heartbeat_timeout_ms`). The actuator's should be short: while it hangs the
+    /// servo controller holds the last pulses.
+    pub heartbeat_timeout_ms: Option<u64>,
 }
 
 /// A stage's resolved process settings.
@@ -885,6 +889,8 @@ pub struct StageSpec {
     pub restart_window_s: u64,
     /// CPU niceness.
     pub nice: i32,
+    /// Hang bound, ms.
+    pub heartbeat_timeout_ms: u64,
 }
 
 /// The binary that runs a stage by default.
@@ -1233,6 +1239,14 @@ impl HvsConfig {
                     format!("= {n} must be in -20..=19"),
                 ));
             }
+            if let Some(t) = o.heartbeat_timeout_ms
+                && t < 200
+            {
+                return Err(self.invalid(
+                    &format!("stages.{name}.heartbeat_timeout_ms"),
+                    format!("= {t} is too short (minimum 200: stages beat every 100 ms)"),
+                ));
+            }
             if o.max_restarts == Some(0) && o.restart.is_some_and(|r| r != RestartPolicy::Never) {
                 return Err(self.invalid(
                     &format!("stages.{name}.max_restarts"),
@@ -1436,6 +1450,9 @@ impl HvsConfig {
                     max_restarts: o.max_restarts.unwrap_or(10),
                     restart_window_s: o.restart_window_s.unwrap_or(60),
                     nice: o.nice.unwrap_or(if name == "stereo-hi" { 10 } else { 0 }),
+                    heartbeat_timeout_ms: o
+                        .heartbeat_timeout_ms
+                        .unwrap_or(self.supervisor.heartbeat_timeout_ms),
                 }
             })
             .collect()

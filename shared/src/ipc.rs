@@ -435,6 +435,26 @@ impl IpcNode {
     }
 }
 
+/// The files iceoryx2 keeps in /dev/shm and /tmp/iceoryx2 (to check nothing leaks), except
+/// its domain-wide node counter (`*.global_mgmt`), which iceoryx2 creates once without owner
+/// and keeps by design.
+pub fn iceoryx_files() -> Vec<String> {
+    let mut files = Vec::new();
+    for dir in ["/dev/shm", "/tmp/iceoryx2/services", "/tmp/iceoryx2/nodes"] {
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for e in entries.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let ours = dir != "/dev/shm" || name.starts_with("iox2_");
+                if ours && !name.ends_with(".global_mgmt") {
+                    files.push(format!("{dir}/{name}"));
+                }
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
 /// Removes the stale resources of every dead iceoryx2 node; returns how many were removed.
 pub fn cleanup_dead_nodes() -> usize {
     let mut removed = 0;

@@ -607,7 +607,6 @@ impl Supervisor {
     }
 
     fn poll_children(&mut self) {
-        let hb_timeout = Duration::from_millis(self.config.supervisor.heartbeat_timeout_ms);
         let startup_timeout = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
         for i in 0..self.slots.len() {
             let slot = &mut self.slots[i];
@@ -671,7 +670,7 @@ impl Supervisor {
                 .map(|t| t.elapsed())
                 .unwrap_or_else(|| slot.spawned_at.elapsed());
             let limit = match slot.state {
-                StageState::Running => Some(hb_timeout),
+                StageState::Running => Some(Duration::from_millis(slot.spec.heartbeat_timeout_ms)),
                 StageState::Starting => Some(startup_timeout),
                 _ => None,
             };

@@ -56,18 +56,7 @@ fn hvs_command(exe: &Path) -> Command {
 
 /// Shared-memory and iceoryx2 files of this machine.
 fn iceoryx_files() -> std::collections::BTreeSet<String> {
-    let mut files = std::collections::BTreeSet::new();
-    for dir in ["/dev/shm", "/tmp/iceoryx2/services", "/tmp/iceoryx2/nodes"] {
-        if let Ok(entries) = std::fs::read_dir(dir) {
-            for e in entries.flatten() {
-                let name = e.file_name().to_string_lossy().into_owned();
-                if dir != "/dev/shm" || name.starts_with("iox2_") {
-                    files.insert(format!("{dir}/{name}"));
-                }
-            }
-        }
-    }
-    files
+    hvs_shared::ipc::iceoryx_files().into_iter().collect()
 }
 
 fn fd_count(pid: u32) -> usize {

@@ -330,22 +330,4 @@ pub fn signal_pid(pid: u32, signal: Signal) {
         .unwrap_or_else(|e| panic!("signal {signal} to {pid}: {e}"));
 }
 
-/// The files iceoryx2 keeps in /dev/shm and /tmp/iceoryx2 (to check nothing leaks), except
-/// its domain-wide node counter (`*.global_mgmt`), which iceoryx2 creates once without owner
-/// and keeps by design.
-pub fn iceoryx_files() -> Vec<String> {
-    let mut files = Vec::new();
-    for dir in ["/dev/shm", "/tmp/iceoryx2/services", "/tmp/iceoryx2/nodes"] {
-        if let Ok(entries) = std::fs::read_dir(dir) {
-            for e in entries.flatten() {
-                let name = e.file_name().to_string_lossy().into_owned();
-                let ours = dir != "/dev/shm" || name.starts_with("iox2_");
-                if ours && !name.ends_with(".global_mgmt") {
-                    files.push(format!("{dir}/{name}"));
-                }
-            }
-        }
-    }
-    files.sort();
-    files
-}
+pub use hvs_shared::ipc::iceoryx_files;
