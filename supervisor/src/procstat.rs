@@ -32,6 +32,11 @@ fn parse(stat: &str, statm: &str, ticks_per_s: f64, page_bytes: u64) -> Option<P
     })
 }
 
+/// Bytes as MiB.
+pub fn mib(bytes: u64) -> f64 {
+    bytes as f64 / (1024.0 * 1024.0)
+}
+
 fn clock_ticks_per_s() -> f64 {
     // SAFETY: sysconf has no preconditions.
     let t = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };

@@ -28,9 +28,6 @@ use nix::sys::signal::Signal;
 
 use crate::process::{self, Launch};
 use crate::procstat::{self, ProcSample};
-
-/// Bytes in a MiB.
-const MIB: f64 = 1024.0 * 1024.0;
 use crate::report::{LatencyReport, RunReport, SimReport, StageReport};
 
 /// Supervisor loop period.
@@ -58,21 +55,13 @@ pub struct RunOptions {
     pub record: Option<PathBuf>,
 }
 
-/// The MCAP magic every recording starts with.
-const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
-
-/// Checks that `path` is there and starts like an MCAP file (the capture stage reads it).
+/// Checks, before any stage starts, that `path` is there and starts like an MCAP file (the
+/// capture stage reads it).
 fn check_recording(path: &Path) -> anyhow::Result<PathBuf> {
     let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-    let mut head = [0u8; 8];
-    let mut file = File::open(&abs)
-        .with_context(|| format!("--replay {}: cannot open the recording", path.display()))?;
-    let n = std::io::Read::read(&mut file, &mut head)
-        .with_context(|| format!("--replay {}: cannot read the recording", path.display()))?;
-    if head[..n] != *MCAP_MAGIC {
+    if let Err(e) = hvs_capture::replay::check_magic(&abs) {
         bail!(
-            "--replay {}: not an MCAP file (it does not start with the MCAP magic); \
-             record one with `hvs run --record` or `hvs probe record`",
+            "--replay {}: {e}; record one with `hvs run --record` or `hvs probe record`",
             path.display()
         );
     }
@@ -641,25 +630,6 @@ impl Supervisor {
                 } else {
                     tracing::info!("hvs: {} (pid {}) exited cleanly", slot.spec.name, slot.pid);
                 }
-                if slot.spec.name == "capture"
-                    && self.config.capture.source == CaptureSource::Replay
-                {
-                    // The end of the recording (the pipeline has decided on its last frame),
-                    // or a recording that cannot be read: played again from its start it
-                    // would repeat decisions, so the run ends either way.
-                    slot.state = if failed {
-                        StageState::Failed
-                    } else {
-                        StageState::Stopped
-                    };
-                    slot.pid = 0;
-                    self.replay_end = Some(if failed {
-                        ReplayEnd::Failed(code)
-                    } else {
-                        ReplayEnd::Finished
-                    });
-                    continue;
-                }
                 self.after_exit(i, failed);
                 continue;
             }
@@ -716,6 +686,22 @@ impl Supervisor {
         let ran_for = slot.spawned_at.elapsed();
         slot.pid = 0;
         slot.cpu_s_past += slot.proc_now.take().map_or(0.0, |s| s.cpu_s);
+        if slot.spec.name == "capture" && self.config.capture.source == CaptureSource::Replay {
+            // The end of the recording (the pipeline has decided on its last frame), or a
+            // recording that cannot be read: played again from its start it would repeat
+            // decisions, so the run ends either way, whatever the restart policy says.
+            slot.state = if failed {
+                StageState::Failed
+            } else {
+                StageState::Stopped
+            };
+            self.replay_end = Some(if failed {
+                ReplayEnd::Failed(slot.last_exit)
+            } else {
+                ReplayEnd::Finished
+            });
+            return;
+        }
         if slot.restart_requested {
             slot.restart_requested = false;
             slot.restarts += 1;
@@ -977,8 +963,8 @@ impl Supervisor {
                     last_exit: s.last_exit,
                     cpu_s: s.cpu_s(),
                     cpu_pct: 100.0 * s.cpu_s() / duration_s.max(1e-3),
-                    rss_mib: s.proc_now.map_or(0.0, |p| p.rss_bytes as f64 / MIB),
-                    rss_max_mib: s.rss_max_bytes as f64 / MIB,
+                    rss_mib: s.proc_now.map_or(0.0, |p| procstat::mib(p.rss_bytes)),
+                    rss_max_mib: procstat::mib(s.rss_max_bytes),
                 }
             })
             .collect();

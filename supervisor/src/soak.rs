@@ -19,7 +19,7 @@ use anyhow::{Context, bail};
 use hvs_shared::config::run_dir;
 
 use crate::control;
-use crate::procstat;
+use crate::procstat::{self, mib};
 
 /// Options of `hvs bench soak`.
 #[derive(Debug, Clone)]
@@ -111,10 +111,6 @@ fn watch_actuator(
         }
     });
     Ok((child, sent, watchdog))
-}
-
-fn mib(bytes: u64) -> f64 {
-    bytes as f64 / (1024.0 * 1024.0)
 }
 
 /// `hvs bench soak`.
@@ -274,7 +270,7 @@ pub fn run(opts: &SoakOptions) -> anyhow::Result<()> {
     println!("targets");
     println!(
         "  no memory growth (largest stage growth < 4 MiB):  {:+.2} MiB  {}",
-        growth as f64 / (1024.0 * 1024.0),
+        growth.signum() as f64 * mib(growth.unsigned_abs()),
         verdict(growth < 4 << 20)
     );
     let fd_growth: Vec<String> = stages

@@ -263,10 +263,39 @@ fn open_messages(path: &Path) -> Result<mcap::io::MessageReader<BufReader<File>>
 /// message is 0.4 MB), so 64 MiB is far above anything it writes.
 const MAX_RECORD_BYTES: usize = 64 << 20;
 
+/// Checks that `path` can be opened and starts with the MCAP magic (cheap: 8 bytes; `hvs run
+/// --replay` calls it before starting any stage).
+pub fn check_magic(path: &Path) -> Result<(), ReplayError> {
+    let open_error = |source| ReplayError::Open {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut head = [0u8; 8];
+    let n = std::io::Read::read(&mut File::open(path).map_err(open_error)?, &mut head)
+        .map_err(open_error)?;
+    if head[..n] != *mcap::MAGIC {
+        return Err(ReplayError::Mcap {
+            path: path.to_path_buf(),
+            detail: "it does not start with the MCAP magic".to_string(),
+        });
+    }
+    Ok(())
+}
+
 fn mcap_error(path: &Path, e: mcap::McapError) -> ReplayError {
     ReplayError::Mcap {
         path: path.to_path_buf(),
         detail: e.to_string(),
+    }
+}
+
+/// A message that does not have the recorder's layout.
+fn malformed(path: &Path, message: &mcap::Message<'_>, detail: String) -> ReplayError {
+    ReplayError::Message {
+        path: path.to_path_buf(),
+        channel: message.channel.topic.clone(),
+        sequence: message.sequence,
+        detail,
     }
 }
 
@@ -277,24 +306,7 @@ fn side_bit(topic: &str) -> u8 {
 impl ReplayIndex {
     /// Reads the file once (everything but the pixels) and plans the replay.
     pub fn open(path: &Path) -> Result<Self, ReplayError> {
-        let mut head = [0u8; 8];
-        let n = std::io::Read::read(
-            &mut File::open(path).map_err(|source| ReplayError::Open {
-                path: path.to_path_buf(),
-                source,
-            })?,
-            &mut head,
-        )
-        .map_err(|source| ReplayError::Open {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        if head[..n] != *mcap::MAGIC {
-            return Err(ReplayError::Mcap {
-                path: path.to_path_buf(),
-                detail: "it does not start with the MCAP magic".to_string(),
-            });
-        }
+        check_magic(path)?;
         let mut frames: BTreeMap<u64, FrameEntry> = BTreeMap::new();
         let mut sent = Vec::new();
         let mut channels: BTreeMap<String, u64> = BTreeMap::new();
@@ -315,17 +327,12 @@ impl ReplayIndex {
             readable_messages += 1;
             let topic = message.channel.topic.as_str();
             *channels.entry(topic.to_string()).or_default() += 1;
-            let malformed = |detail: String| ReplayError::Message {
-                path: path.to_path_buf(),
-                channel: topic.to_string(),
-                sequence: message.sequence,
-                detail,
-            };
+            let bad = |detail: String| malformed(path, &message, detail);
             let data = &message.data[..];
             match topic {
                 LO_LEFT | LO_RIGHT | HI_LEFT | HI_RIGHT => {
                     let h: ImageHeaderOnly =
-                        serde_json::from_slice(data).map_err(|e| malformed(e.to_string()))?;
+                        serde_json::from_slice(data).map_err(|e| bad(e.to_string()))?;
                     let entry = frames.entry(h.hvs_header.frame_id).or_default();
                     entry.capture_ns = h.hvs_header.capture_ns;
                     if topic.starts_with("/frames/320x240") {
@@ -337,7 +344,7 @@ impl ReplayIndex {
                 RANGES => {
                     has_ranges = true;
                     let r: RangesJson =
-                        serde_json::from_slice(data).map_err(|e| malformed(e.to_string()))?;
+                        serde_json::from_slice(data).map_err(|e| bad(e.to_string()))?;
                     frames.entry(r.frame_id).or_default().fused_hi = Some(r.hi_frame_id);
                     if r.hi_frame_id != 0 {
                         frames.entry(r.hi_frame_id).or_default().hi_used = true;
@@ -347,13 +354,13 @@ impl ReplayIndex {
                     has_decisions = true;
                     decisions += 1;
                     let d: FrameIdJson =
-                        serde_json::from_slice(data).map_err(|e| malformed(e.to_string()))?;
+                        serde_json::from_slice(data).map_err(|e| bad(e.to_string()))?;
                     frames.entry(d.frame_id).or_default().decided = true;
                 }
                 ACTUATOR_SENT => {
                     let s: SentJson =
-                        serde_json::from_slice(data).map_err(|e| malformed(e.to_string()))?;
-                    sent.push(s.report().map_err(malformed)?);
+                        serde_json::from_slice(data).map_err(|e| bad(e.to_string()))?;
+                    sent.push(s.report().map_err(bad)?);
                 }
                 _ => {}
             }
@@ -523,15 +530,10 @@ impl ReplayReader<'_> {
     fn take_image(&mut self, message: &mcap::Message<'_>) -> Result<(), ReplayError> {
         let path = &self.index.path;
         let topic = message.channel.topic.as_str();
-        let malformed = |detail: String| ReplayError::Message {
-            path: path.clone(),
-            channel: topic.to_string(),
-            sequence: message.sequence,
-            detail,
-        };
+        let bad = |detail: String| malformed(path, message, detail);
         let lo = topic.starts_with("/frames/320x240");
         let image: RawImageJson =
-            serde_json::from_slice(&message.data).map_err(|e| malformed(e.to_string()))?;
+            serde_json::from_slice(&message.data).map_err(|e| bad(e.to_string()))?;
         let Some(i) = self.step_of(image.hvs_header.frame_id) else {
             return Ok(());
         };
@@ -545,7 +547,7 @@ impl ReplayReader<'_> {
             (HI_WIDTH, HI_HEIGHT)
         };
         if image.width as usize != w || image.height as usize != h {
-            return Err(malformed(format!(
+            return Err(bad(format!(
                 "image {}x{}, expected {w}x{h}",
                 image.width, image.height
             )));
@@ -553,12 +555,9 @@ impl ReplayReader<'_> {
         let mut pixels = vec![0u8; w * h];
         let n = base64::engine::general_purpose::STANDARD
             .decode_slice(image.data.as_bytes(), &mut pixels)
-            .map_err(|e| malformed(format!("image data: {e}")))?;
+            .map_err(|e| bad(format!("image data: {e}")))?;
         if n != w * h {
-            return Err(malformed(format!(
-                "image data has {n} bytes, expected {}",
-                w * h
-            )));
+            return Err(bad(format!("image data has {n} bytes, expected {}", w * h)));
         }
         let j = &image.hvs_header;
         let left_ns = j.left_capture_ns.unwrap_or(j.capture_ns);

@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::error_chain;
 use hvs_shared::ipc::{ReceiveError, TopicSubscriber};
-use hvs_shared::messages::{FrameHeader, StereoFrame320x240, StereoFrame640x480};
+use hvs_shared::messages::{FrameHeader, StereoFrame320x240, StereoFrame640x480, StereoPayload};
 use hvs_shared::topics::{Topic, TopicByPath};
 use serde_json::{Value, json};
 
@@ -185,14 +185,14 @@ pub trait Recordable: Payload {
 impl Recordable for StereoFrame320x240 {
     const STEREO: bool = true;
     fn stereo(&self) -> Option<(&FrameHeader, &[u8], &[u8])> {
-        Some((&self.header, &self.left, &self.right))
+        Some(self.parts())
     }
 }
 
 impl Recordable for StereoFrame640x480 {
     const STEREO: bool = true;
     fn stereo(&self) -> Option<(&FrameHeader, &[u8], &[u8])> {
-        Some((&self.header, &self.left, &self.right))
+        Some(self.parts())
     }
 }
 

@@ -9,8 +9,7 @@ use std::process::ExitCode;
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::ipc::TopicSubscriber;
 use hvs_shared::messages::{
-    DisparityHeader, DisparityMap320x240, DisparityMap640x480, FrameHeader, StereoFrame320x240,
-    StereoFrame640x480,
+    DisparityHeader, DisparityMap320x240, DisparityMap640x480, StereoPayload,
 };
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics::{self, Topic};
@@ -22,33 +21,30 @@ fn main() -> ExitCode {
             rt,
             &topics::FRAMES_HI,
             &topics::DISPARITY_HI,
-            |f: &StereoFrame640x480| (&f.header, &f.left[..], &f.right[..]),
             |m: &mut DisparityMap640x480| (&mut m.header, &mut m.disparity_q8[..]),
         ),
         _ => run_path(
             rt,
             &topics::FRAMES_LO,
             &topics::DISPARITY_LO,
-            |f: &StereoFrame320x240| (&f.header, &f.left[..], &f.right[..]),
             |m: &mut DisparityMap320x240| (&mut m.header, &mut m.disparity_q8[..]),
         ),
     })
 }
 
-type FrameParts<F> = fn(&F) -> (&FrameHeader, &[u8], &[u8]);
 type MapParts<M> = fn(&mut M) -> (&mut DisparityHeader, &mut [u16]);
 
 fn run_path<F, M>(
     rt: &mut StageRuntime,
     frames_topic: &Topic<F>,
     maps_topic: &Topic<M>,
-    frame_parts: FrameParts<F>,
     map_parts: MapParts<M>,
 ) -> Result<(), StageError>
 where
     F: core::fmt::Debug
         + iceoryx2::prelude::ZeroCopySend
         + hvs_shared::messages::Sequenced
+        + StereoPayload
         + 'static,
     M: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + bytemuck::Pod + 'static,
 {
@@ -93,7 +89,7 @@ where
         let received_ns = monotonic_ns();
         rt.count_in(1);
         rt.set_drops(frames.dropped());
-        let (header, left, right) = frame_parts(frame.payload());
+        let (header, left, right) = frame.payload().parts();
         let (w, h) = (header.width as usize, header.height as usize);
         let pair = ImageView::new(left, w, h).and_then(|l| Ok((l, ImageView::new(right, w, h)?)));
         let (left, right) = match pair {
