@@ -328,12 +328,9 @@ impl VisitGrid {
         self.visits.get(&self.cell(x_m, y_m)).copied().unwrap_or(0)
     }
 
-    /// How visited the way along `heading_rad` from a position looks: the visits (each cell
-    /// counted at most 3 times) in a swath three cells wide from 1 to `SCORE_REACH_CELLS`
-    /// cells away, the nearest 3 cells weighted double. A long reach is what breaks loops:
-    /// the way round a block the robot has already driven looks visited from its start,
-    /// whereas the first cells of every branch at a junction the robot just crossed are
-    /// usually all visited (the robot swept the junction while turning).
+    /// How visited the way along `heading_rad` from a position looks: the visits of the
+    /// next three cells along it, the nearest weighted 3, then 2, then 1. (A longer reach,
+    /// 10 cells in a swath three cells wide, did not cover more of the maze.)
     pub fn score(&self, x_m: f64, y_m: f64, heading_rad: f64) -> u32 {
         (1..=3)
             .map(|k| {
@@ -438,6 +435,14 @@ enum Maneuver {
     Backup { until_m: f64 },
     /// Creeping ahead until `until_m` of odometry, to the middle of the opening to turn into.
     Creep { until_m: f64 },
+    /// Standing still until `until_ns` after a turn that ended facing a wall, so that the
+    /// wheels stop, the walls can fix the heading and the windows show the new view before
+    /// the next turn is chosen (`command`, `target_rad`: the turn that ended).
+    Settle {
+        until_ns: u64,
+        command: MotionCommand,
+        target_rad: f64,
+    },
 }
 
 /// One decision of the [`Navigator`], with what it was based on.
@@ -466,6 +471,26 @@ const APPROACH_RATIO: f64 = 0.75;
 /// Frames of an unchanged view while moving that mean the robot is wedged (about 1 s at
 /// 15 Hz).
 const STUCK_FRAMES: u32 = 15;
+/// Dead-reckoned driving (metres) or turning (degrees) with an unchanged view that means
+/// the robot is wedged, and the relative change of a window's range (at least
+/// `WEDGE_CHANGE_M`) that counts as a changed view. Driving 0.5 m changes the front range
+/// by at least 5 % up to 10 m; turning 30 degrees moves the view by more than half the
+/// camera's field.
+const WEDGE_DRIVE_M: f64 = 0.5;
+const WEDGE_TURN_DEG: f64 = 30.0;
+const WEDGE_CHANGE: f64 = 0.05;
+const WEDGE_CHANGE_M: f64 = 0.1;
+
+/// Whether a window's range appeared, vanished or changed by more than `WEDGE_CHANGE`
+/// (at least `WEDGE_CHANGE_M`) between two views.
+fn view_changed(before: &[Option<f64>], now: &[Option<f64>]) -> bool {
+    before.iter().zip(now).any(|(a, b)| match (a, b) {
+        (Some(a), Some(b)) => (a - b).abs() > (WEDGE_CHANGE * a).max(WEDGE_CHANGE_M),
+        (None, None) => false,
+        _ => true,
+    })
+}
+
 /// How far to back up when wedged, metres.
 const BACKUP_M: f64 = 0.25;
 /// A side window whose nearest points are nearer than this (a wall about 0.3 m to the side)
@@ -506,6 +531,9 @@ const CORRECTION_SPACING_M: f64 = 0.25;
 /// long to reach the wheels: one decision period plus two PSC commands on a 2400 baud wire).
 const TURN_LEAD_S: f64 = 0.1;
 
+/// How long the robot stands still after a turn that ended facing a wall, nanoseconds.
+const SETTLE_NS: u64 = 400_000_000;
+
 /// The stateful decision maker of the decision stage.
 #[derive(Debug, Clone)]
 pub struct Navigator {
@@ -527,6 +555,8 @@ pub struct Navigator {
     /// while the robot was commanded to move.
     last_view: [Option<f64>; 3],
     frozen_frames: u32,
+    /// The view when it last changed, with the odometry distance and heading then.
+    view_anchor: Option<([Option<f64>; 3], f64, f64)>,
     /// Frames in a row with no range in any window.
     blind_frames: u32,
     /// What the obstacle scans showed around the robot.
@@ -563,6 +593,7 @@ impl Navigator {
             attempts: 0,
             last_view: [None; 3],
             frozen_frames: 0,
+            view_anchor: None,
             blind_frames: 0,
             map: LocalMap::new(cfg.local_map_cell_m, cfg.local_map_age_s),
             camera_forward_m: 0.2,
@@ -631,10 +662,17 @@ impl Navigator {
     ) -> NavDecision {
         self.odometry.advance_to(now_ns);
         self.now_ns = now_ns;
+        // The walls fix the heading only while the front window sees something: facing a
+        // wall closer than the matcher's shortest range, the few points left are noise
+        // (measured: a 19 degree wrong fix while standing at a dead end's wall).
+        let front_seen = SideRanges::from_windows(windows, window_count)
+            .middle_m
+            .is_some();
         if self.cfg.local_map
             && self.cfg.heading_fix_gain > 0.0
             && self.cfg.snap_turn_deg == 90.0
             && self.odometry.turn_rate_rad_s().abs() < HEADING_FIX_MAX_TURN_RAD_S
+            && front_seen
             && let Some(a) = wall_direction(scan, MAP_RANGE_M, HEADING_FIX_VOTES)
         {
             // The walls run at a (mod 90 degrees) in the robot's frame: the heading is -a
@@ -825,13 +863,29 @@ impl Navigator {
         });
         self.last_view = view;
         let moving = !matches!(self.current, MotionCommand::Stop);
-        self.frozen_frames = if same && moving {
+        // A blind view (no window has data: a wall closer than the matcher's shortest range)
+        // stays the same however the robot moves, so it says nothing about being wedged.
+        let blind = view.iter().all(Option::is_none);
+        self.frozen_frames = if same && moving && !blind {
             self.frozen_frames + 1
         } else {
             0
         };
-        if self.frozen_frames >= STUCK_FRAMES {
+        // A noisy view can defeat that frame-to-frame test: also wedged when dead reckoning
+        // has the robot `WEDGE_DRIVE_M` on (the front window seeing something) or
+        // `WEDGE_TURN_DEG` round (any window seeing something) since the view last changed
+        // by more than `WEDGE_CHANGE` of a range.
+        let odo = (self.odometry.distance_m(), pose.heading_rad);
+        let anchor = match self.view_anchor {
+            Some((v, d, h)) if !view_changed(&v, &view) => (v, d, h),
+            _ => (view, odo.0, odo.1),
+        };
+        self.view_anchor = Some(anchor);
+        let wedged_noisy = (odo.0 - anchor.1 >= WEDGE_DRIVE_M && view[1].is_some())
+            || ((odo.1 - anchor.2).abs() >= WEDGE_TURN_DEG.to_radians() && !blind);
+        if self.frozen_frames >= STUCK_FRAMES || wedged_noisy {
             self.frozen_frames = 0;
+            self.view_anchor = None;
             self.attempts = 0;
             // Wedged: back away; if backing up is what is stuck (a corner behind), pull
             // forward instead.
@@ -869,14 +923,36 @@ impl Navigator {
                 }
                 self.approach = None;
                 self.front_was_near = false;
-                self.maneuver = Maneuver::Commit {
-                    until_m: self.odometry.distance_m() + self.cfg.commit_m,
-                };
-                if !front_blocked {
-                    self.current = MotionCommand::Forward;
-                    self.pending = None;
-                    return decision(MotionCommand::Forward, 0.0, 0, intersection);
+                // Blind right after a turn: a wall closer than the matcher's shortest range.
+                if !front_blocked && !no_data {
+                    return decision(self.commit(), 0.0, 0, intersection);
                 }
+                // Facing a wall: stand still before choosing the next turn. Turning on at
+                // once kept the dead-reckoned heading from being fixed by the walls (the fix
+                // waits for a slow turn rate), and a robot whose heading was 30 degrees off
+                // the axes turned on the spot for minutes, every quarter turn ending at a
+                // corner.
+                self.maneuver = Maneuver::Settle {
+                    until_ns: now.saturating_add(SETTLE_NS),
+                    command,
+                    target_rad,
+                };
+                self.current = MotionCommand::Stop;
+                return decision(MotionCommand::Stop, 0.0, 0, intersection);
+            }
+            Maneuver::Settle {
+                until_ns,
+                command,
+                target_rad,
+            } => {
+                if now < until_ns {
+                    self.current = MotionCommand::Stop;
+                    return decision(MotionCommand::Stop, 0.0, 0, intersection);
+                }
+                if !front_blocked && !no_data {
+                    return decision(self.commit(), 0.0, 0, intersection);
+                }
+                self.maneuver = Maneuver::Cruise;
                 // Still blocked: the branch guessed from afar was not there. Try the other
                 // side (half a turn back past the start), then, if that is a wall too, the
                 // way back (a dead end). After turning round (a dead end) a quarter turn on.
@@ -1071,6 +1147,16 @@ impl Navigator {
         self.turn_shifts = 0;
         self.begin_turning(pose, command, target_rad);
         command
+    }
+
+    /// Drives ahead after a turn for `commit_m` (no new branch before) and returns the command.
+    fn commit(&mut self) -> MotionCommand {
+        self.maneuver = Maneuver::Commit {
+            until_m: self.odometry.distance_m() + self.cfg.commit_m,
+        };
+        self.current = MotionCommand::Forward;
+        self.pending = None;
+        MotionCommand::Forward
     }
 
     /// Puts the navigator into a turn (no checks).
@@ -1549,6 +1635,8 @@ mod tests {
         // A left turn (walls front and right), then, once the robot turns, a hallway.
         let left_turn = windows_ft(2.569, 2.258, 1.760);
         let hallway = windows_ft(2.675, 3.054, 2.910);
+        // A turning camera's view changes (an unchanged one while turning means wedged).
+        let hallway_turned = windows_ft(2.9, 3.4, 3.2);
         // Snapped to the hallway axes (the default), and by the reference's acos angle.
         let reference_deg = turn_angle_deg(2.258, 2.569).max(30.0);
         for (snap, expected) in [(90.0, 90.0), (0.0, reference_deg)] {
@@ -1563,7 +1651,11 @@ mod tests {
             for i in 0..200 {
                 t += 33_000_000;
                 let d = nav.decide(
-                    if i == 0 { &left_turn } else { &hallway },
+                    match i {
+                        0 => &left_turn,
+                        i if i % 2 == 0 => &hallway_turned,
+                        _ => &hallway,
+                    },
                     3,
                     &ObstacleScan::default(),
                     t,
@@ -1600,6 +1692,18 @@ mod tests {
                 "snap {snap}: turned {turned} expected {expected}"
             );
         }
+    }
+
+    #[test]
+    fn a_view_changes_by_five_percent_or_a_tenth_of_a_metre_or_a_window_coming_or_going() {
+        let v = [Some(3.88), Some(2.84), Some(1.85)];
+        // The noise of a robot pinned at a corner (measured): not a change.
+        assert!(!view_changed(&v, &[Some(3.89), Some(2.96), Some(1.84)]));
+        assert!(view_changed(&v, &[Some(3.88), Some(2.60), Some(1.85)]));
+        assert!(!view_changed(&[Some(0.5)], &[Some(0.59)]));
+        assert!(view_changed(&[Some(0.5)], &[Some(0.61)]));
+        assert!(view_changed(&[Some(0.5)], &[None]));
+        assert!(!view_changed(&[None, None], &[None, None]));
     }
 
     #[test]
