@@ -665,9 +665,8 @@ impl Navigator {
         // The walls fix the heading only while the front window sees something: facing a
         // wall closer than the matcher's shortest range, the few points left are noise
         // (measured: a 19 degree wrong fix while standing at a dead end's wall).
-        let front_seen = SideRanges::from_windows(windows, window_count)
-            .middle_m
-            .is_some();
+        let sides = SideRanges::from_windows(windows, window_count);
+        let front_seen = sides.middle_m.is_some();
         if self.cfg.local_map
             && self.cfg.heading_fix_gain > 0.0
             && self.cfg.snap_turn_deg == 90.0
@@ -691,7 +690,6 @@ impl Navigator {
                 .insert_scan(&pose, self.camera_forward_m, scan, MAP_RANGE_M, now_ns);
         }
         self.grid.record(pose.x_m, pose.y_m);
-        let sides = SideRanges::from_windows(windows, window_count);
         let idx = SideRanges::indices(window_count);
         let picked = idx.map(|i| windows.get(i));
         let raw = fuzzy_memberships(&sides, &self.cfg);
