@@ -1635,6 +1635,25 @@ mod tests {
         );
     }
 
+    /// Tells the navigator a command's pulses went out at `t_ns` (an actuator that sends
+    /// every command at once).
+    fn send_at_once(
+        nav: &mut Navigator,
+        p: &PulseTable,
+        t_ns: u64,
+        command: MotionCommand,
+        ramp: u8,
+    ) {
+        let pulses = match command {
+            MotionCommand::Left => p.left,
+            MotionCommand::Right => p.right,
+            MotionCommand::Forward => p.forward,
+            MotionCommand::Reverse => p.reverse,
+            MotionCommand::Stop => p.neutral,
+        };
+        nav.on_sent(t_ns, pulses.left, pulses.right, ramp);
+    }
+
     #[test]
     fn a_turn_is_executed_to_its_angle_by_dead_reckoning_then_committed() {
         let p = PulseTable::default();
@@ -1667,15 +1686,7 @@ mod tests {
                     t,
                 );
                 ramps.push(d.ramp);
-                // The actuator sends every command at once.
-                let pulses = match d.command {
-                    MotionCommand::Left => p.left,
-                    MotionCommand::Right => p.right,
-                    MotionCommand::Forward => p.forward,
-                    MotionCommand::Reverse => p.reverse,
-                    MotionCommand::Stop => p.neutral,
-                };
-                nav.on_sent(t, pulses.left, pulses.right, d.ramp as u8);
+                send_at_once(&mut nav, &p, t, d.command, d.ramp as u8);
                 commands.push(d.command);
                 if d.command == MotionCommand::Forward {
                     break;
@@ -1718,14 +1729,7 @@ mod tests {
             let scale = 1.0 - 0.006 * k as f64;
             let view = windows_ft(10.0 * scale, 10.5 * scale, 10.2 * scale);
             let d = nav.decide(&view, 3, &ObstacleScan::default(), t);
-            let pulses = match d.command {
-                MotionCommand::Forward => p.forward,
-                MotionCommand::Reverse => p.reverse,
-                MotionCommand::Left => p.left,
-                MotionCommand::Right => p.right,
-                MotionCommand::Stop => p.neutral,
-            };
-            nav.on_sent(t, pulses.left, pulses.right, 0);
+            send_at_once(&mut nav, &p, t, d.command, 0);
             commands.push(d.command);
         }
         assert!(
