@@ -481,11 +481,16 @@ const WEDGE_TURN_DEG: f64 = 30.0;
 const WEDGE_CHANGE: f64 = 0.05;
 const WEDGE_CHANGE_M: f64 = 0.1;
 
-/// Whether a window's range appeared, vanished or changed by more than `WEDGE_CHANGE`
-/// (at least `WEDGE_CHANGE_M`) between two views.
-fn view_changed(before: &[Option<f64>], now: &[Option<f64>]) -> bool {
+/// The relative change of a window's range (at least `STILL_CHANGE_M`) within which a
+/// view counts as still for the `STUCK_FRAMES` test.
+const STILL_CHANGE: f64 = 0.02;
+const STILL_CHANGE_M: f64 = 0.002;
+
+/// Whether a window's range appeared, vanished or changed by more than `rel` of its range
+/// in `before` (at least `min_m`) between two views.
+fn view_changed(before: &[Option<f64>], now: &[Option<f64>], rel: f64, min_m: f64) -> bool {
     before.iter().zip(now).any(|(a, b)| match (a, b) {
-        (Some(a), Some(b)) => (a - b).abs() > (WEDGE_CHANGE * a).max(WEDGE_CHANGE_M),
+        (Some(a), Some(b)) => (a - b).abs() > (rel * a).max(min_m),
         (None, None) => false,
         _ => true,
     })
@@ -551,8 +556,8 @@ pub struct Navigator {
     front_was_near: bool,
     /// Turns tried at the current junction after the first one met a wall.
     attempts: u32,
-    /// The last frame's three ranges and how many frames in a row they stayed the same
-    /// while the robot was commanded to move.
+    /// The three ranges a still run began with, and how many frames in a row they stayed
+    /// within `STILL_CHANGE` of them while the robot was commanded to move.
     last_view: [Option<f64>; 3],
     frozen_frames: u32,
     /// The view when it last changed, with the odometry distance and heading then.
@@ -857,11 +862,7 @@ impl Navigator {
         // frame: at 0.27 m/s a wall 2.7 m ahead comes 0.7 % nearer a frame, and a
         // frame-to-frame test took a robot driving down an open hallway for a wedged one.
         let view = [sides.left_m, sides.middle_m, sides.right_m];
-        let same = view.iter().zip(&self.last_view).all(|(a, b)| match (a, b) {
-            (Some(a), Some(b)) => (a - b).abs() <= 0.02 * b.max(0.1),
-            (None, None) => true,
-            _ => false,
-        });
+        let same = !view_changed(&self.last_view, &view, STILL_CHANGE, STILL_CHANGE_M);
         if !same {
             self.last_view = view;
         }
@@ -874,13 +875,13 @@ impl Navigator {
         } else {
             0
         };
-        // A noisy view can defeat that frame-to-frame test: also wedged when dead reckoning
-        // has the robot `WEDGE_DRIVE_M` on (the front window seeing something) or
-        // `WEDGE_TURN_DEG` round (any window seeing something) since the view last changed
-        // by more than `WEDGE_CHANGE` of a range.
+        // A noisy view can defeat that test: also wedged when dead reckoning has the robot
+        // `WEDGE_DRIVE_M` on (the front window seeing something) or `WEDGE_TURN_DEG` round
+        // (any window seeing something) since the view last changed by more than
+        // `WEDGE_CHANGE` of a range.
         let odo = (self.odometry.distance_m(), pose.heading_rad);
         let anchor = match self.view_anchor {
-            Some((v, d, h)) if !view_changed(&v, &view) => (v, d, h),
+            Some((v, d, h)) if !view_changed(&v, &view, WEDGE_CHANGE, WEDGE_CHANGE_M) => (v, d, h),
             _ => (view, odo.0, odo.1),
         };
         self.view_anchor = Some(anchor);
@@ -1741,7 +1742,7 @@ mod tests {
         let wedged = (0..30).any(|_| {
             t += 66_666_667;
             let d = nav.decide(&view, 3, &ObstacleScan::default(), t);
-            nav.on_sent(t, p.forward.left, p.forward.right, 0);
+            send_at_once(&mut nav, &p, t, MotionCommand::Forward, 0);
             d.command == MotionCommand::Reverse
         });
         assert!(wedged);
@@ -1749,14 +1750,16 @@ mod tests {
 
     #[test]
     fn a_view_changes_by_five_percent_or_a_tenth_of_a_metre_or_a_window_coming_or_going() {
+        let changed =
+            |a: &[Option<f64>], b: &[Option<f64>]| view_changed(a, b, WEDGE_CHANGE, WEDGE_CHANGE_M);
         let v = [Some(3.88), Some(2.84), Some(1.85)];
         // The noise of a robot pinned at a corner (measured): not a change.
-        assert!(!view_changed(&v, &[Some(3.89), Some(2.96), Some(1.84)]));
-        assert!(view_changed(&v, &[Some(3.88), Some(2.60), Some(1.85)]));
-        assert!(!view_changed(&[Some(0.5)], &[Some(0.59)]));
-        assert!(view_changed(&[Some(0.5)], &[Some(0.61)]));
-        assert!(view_changed(&[Some(0.5)], &[None]));
-        assert!(!view_changed(&[None, None], &[None, None]));
+        assert!(!changed(&v, &[Some(3.89), Some(2.96), Some(1.84)]));
+        assert!(changed(&v, &[Some(3.88), Some(2.60), Some(1.85)]));
+        assert!(!changed(&[Some(0.5)], &[Some(0.59)]));
+        assert!(changed(&[Some(0.5)], &[Some(0.61)]));
+        assert!(changed(&[Some(0.5)], &[None]));
+        assert!(!changed(&[None, None], &[None, None]));
     }
 
     #[test]
