@@ -1097,9 +1097,10 @@ impl Navigator {
         // side window sees the hallway's wall converge on the front wall up to the corner,
         // and the camera never sees beside the robot. Unless the local map saw a wall
         // there, look (a quarter turn that way; the settle after it tries the other side,
-        // then the way back).
+        // then the way back). Without the local map there is nothing to tell a side seen
+        // to be a wall from one never seen: the robot turns back as the table says.
         let mut probe_attempts = None;
-        if command == MotionCommand::Reverse && self.cfg.snap_turn_deg > 0.0 {
+        if command == MotionCommand::Reverse && self.cfg.local_map && self.cfg.snap_turn_deg > 0.0 {
             let unseen: Vec<(MotionCommand, bool)> =
                 [(MotionCommand::Left, true), (MotionCommand::Right, false)]
                     .into_iter()
@@ -1886,7 +1887,7 @@ mod tests {
     fn a_robot_turning_blind_for_a_whole_turn_is_taken_for_a_wedged_one() {
         // Pinned by a corner closer than the matcher's shortest range: no window ever has
         // data, the wheels are told to turn, and only dead reckoning turns. Without this
-        // test the robot turned on the spot for good (the blind view is never "still").
+        // rule the robot turned on the spot for good (the blind view is never "still").
         let p = PulseTable::default();
         let cfg = DecisionConfig {
             local_map: false,
