@@ -1101,10 +1101,11 @@ impl Navigator {
         // to be a wall from one never seen: the robot turns back as the table says.
         let mut probe_attempts = None;
         if command == MotionCommand::Reverse && self.cfg.local_map && self.cfg.snap_turn_deg > 0.0 {
+            let wall_m = FRONT_EDGE_M + self.front_clearance_m(&pose).unwrap_or(0.5);
             let unseen: Vec<(MotionCommand, bool)> =
                 [(MotionCommand::Left, true), (MotionCommand::Right, false)]
                     .into_iter()
-                    .filter(|&(_, left)| !self.corner_wall_seen(&pose, left))
+                    .filter(|&(_, left)| !self.corner_wall_seen(&pose, left, wall_m))
                     .collect();
             let pick = if self.cfg.visit_memory {
                 unseen.iter().copied().min_by_key(|&(c, _)| {
@@ -1365,22 +1366,23 @@ impl Navigator {
     }
 
     /// Whether the local map saw a wall beside the robot (left or right, 0.35..0.8 m from
-    /// its centre line) along the last 0.65 m before the wall ahead, the wall a corner
-    /// opening would leave out: something occupied beside at least half of the way (the
-    /// corner of an opening, or a wall across it further out, is not such a wall).
-    fn corner_wall_seen(&self, pose: &DeadReckonedPose, left: bool) -> bool {
-        let front_m = FRONT_EDGE_M + self.front_clearance_m(pose).unwrap_or(0.5);
+    /// its centre line) along the last 0.65 m before the wall ahead (`wall_m` from its
+    /// centre), the wall a corner opening would leave out: something occupied beside at
+    /// least half of the way (the corner of an opening, or a wall across it further out,
+    /// is not such a wall).
+    fn corner_wall_seen(&self, pose: &DeadReckonedPose, left: bool, wall_m: f64) -> bool {
+        const STEPS: usize = 14;
         let lateral = if left { (0.35, 0.8) } else { (-0.8, -0.35) };
-        let steps: Vec<bool> = (0..=13)
-            .map(|k| front_m - 0.75 + k as f64 * 0.05)
-            .map(|a| {
+        let beside = (0..STEPS)
+            .map(|k| wall_m - 0.75 + k as f64 * 0.05)
+            .filter(|&a| {
                 self.map
                     .count_region(pose, (a, a), lateral, self.now_ns)
                     .occupied
                     > 0
             })
-            .collect();
-        steps.iter().filter(|&&o| o).count() * 2 >= steps.len()
+            .count();
+        beside * 2 >= STEPS
     }
 
     /// A side opening beside the robot (left or right) whose way is less visited than the
@@ -1716,6 +1718,15 @@ mod tests {
         }
     }
 
+    /// A navigator with the default config but no local map (the wedge tests feed no scans).
+    fn navigator_without_map() -> Navigator {
+        let cfg = DecisionConfig {
+            local_map: false,
+            ..DecisionConfig::default()
+        };
+        Navigator::new(&cfg, &PulseTable::default())
+    }
+
     fn navigator(policy: DecisionPolicy) -> Navigator {
         let cfg = DecisionConfig {
             policy,
@@ -1853,11 +1864,7 @@ mod tests {
         // 0.6 % nearer a frame: within a frame-to-frame 2 % test for far longer than the
         // 15 frames that mean "wedged", but 10 % nearer within a second.
         let p = PulseTable::default();
-        let cfg = DecisionConfig {
-            local_map: false,
-            ..DecisionConfig::default()
-        };
-        let mut nav = Navigator::new(&cfg, &p);
+        let mut nav = navigator_without_map();
         let mut t = 0u64;
         let mut commands = Vec::new();
         for k in 0..45 {
@@ -1889,11 +1896,7 @@ mod tests {
         // data, the wheels are told to turn, and only dead reckoning turns. Without this
         // rule the robot turned on the spot for good (the blind view is never "still").
         let p = PulseTable::default();
-        let cfg = DecisionConfig {
-            local_map: false,
-            ..DecisionConfig::default()
-        };
-        let mut nav = Navigator::new(&cfg, &p);
+        let mut nav = navigator_without_map();
         let blind = [window(0.0, 0), window(0.0, 0), window(0.0, 0)];
         let mut t = 0u64;
         let mut turned_rad = 0.0;
