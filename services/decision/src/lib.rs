@@ -881,7 +881,11 @@ impl Navigator {
         // The view is compared with the one the still run began with, not with the previous
         // frame: at 0.27 m/s a wall 2.7 m ahead comes 0.7 % nearer a frame, and a
         // frame-to-frame test took a robot driving down an open hallway for a wedged one.
-        let view = [sides.left_m, sides.middle_m, sides.right_m];
+        // The windows' nearest points (`near_m`, a low percentile) are compared, not their
+        // ranges: a window with few valid pixels had its range jump by 0.3 m from frame to
+        // frame while the robot stood pinned at a corner (its nearest points moved by
+        // 0.01 m), and the robot "turned" against that corner for 90 s.
+        let view = near;
         let same = !view_changed(&self.last_view, &view, STILL_CHANGE, STILL_CHANGE_M);
         if !same {
             self.last_view = view;
@@ -918,6 +922,14 @@ impl Navigator {
         self.last_heading_rad = pose.heading_rad;
         let wedged_blind = self.blind_turn_rad >= std::f64::consts::TAU;
         if self.frozen_frames >= STUCK_FRAMES || wedged_noisy || wedged_blind {
+            // The view has not changed since the anchor: the wheels turned the robot only in
+            // dead reckoning. Taking that turn back keeps the heading on the hallway axes
+            // (a robot pinned while turning kept 45 degrees of turn it never made, beyond
+            // what the walls' directions can fix, and turned on the spot for 80 s facing
+            // corners). A blind view says nothing about the turn: no correction then.
+            if !blind {
+                self.odometry.correct_heading(anchor.2 - pose.heading_rad);
+            }
             self.frozen_frames = 0;
             self.blind_turn_rad = 0.0;
             self.view_anchor = None;
@@ -958,8 +970,11 @@ impl Navigator {
                 }
                 self.approach = None;
                 self.front_was_near = false;
-                // Blind right after a turn: a wall closer than the matcher's shortest range.
-                if !front_blocked && !no_data {
+                // Blind ahead right after a turn: a wall closer than the matcher's shortest
+                // range (the side windows may still see its ends). Committing on a blind
+                // front window drove a robot into a wall 0.3 m ahead, and the branch it had
+                // turned away from was never tried.
+                if !front_blocked && sides.middle_m.is_some() {
                     return decision(self.commit(), 0.0, 0, intersection);
                 }
                 // Facing a wall: stand still before choosing the next turn. Turning on at
@@ -984,7 +999,7 @@ impl Navigator {
                     self.current = MotionCommand::Stop;
                     return decision(MotionCommand::Stop, 0.0, 0, intersection);
                 }
-                if !front_blocked && !no_data {
+                if !front_blocked && sides.middle_m.is_some() {
                     return decision(self.commit(), 0.0, 0, intersection);
                 }
                 self.maneuver = Maneuver::Cruise;
@@ -1919,6 +1934,103 @@ mod tests {
         );
         // Not before a whole turn: a robot turning freely sees something within one.
         assert!(turned_rad >= std::f64::consts::TAU - 0.2, "{turned_rad}");
+    }
+
+    #[test]
+    fn a_robot_pinned_while_turning_takes_back_the_turn_it_never_made() {
+        // A left turn starts; the robot is pinned, so its view never changes while the
+        // wheels turn it in dead reckoning. Once that is taken for wedged, the dead-reckoned
+        // heading goes back to where the view last changed (without that, 30 degrees or
+        // more of a turn never made stayed in the heading).
+        let p = PulseTable::default();
+        let mut nav = navigator_without_map();
+        let left_turn = windows_ft(2.569, 2.258, 1.760);
+        let mut t = 0u64;
+        let mut turned_deg: f64 = 0.0;
+        let mut backed_up = false;
+        for _ in 0..100 {
+            t += 66_666_667;
+            let d = nav.decide(&left_turn, 3, &ObstacleScan::default(), t);
+            send_at_once(&mut nav, &p, t, d.command, 0);
+            turned_deg = turned_deg.max(d.pose.heading_rad.to_degrees().abs());
+            if d.command == MotionCommand::Reverse {
+                backed_up = true;
+                break;
+            }
+        }
+        assert!(backed_up, "never taken for wedged");
+        assert!(turned_deg >= WEDGE_TURN_DEG - 1.0, "{turned_deg}");
+        let heading_deg = nav.pose().heading_rad.to_degrees();
+        // (The anchor is taken a frame into the turn.)
+        assert!(heading_deg.abs() < 5.0, "heading {heading_deg} degrees");
+    }
+
+    #[test]
+    fn a_turn_that_ends_blind_ahead_is_not_driven_on() {
+        // A left turn ends facing a wall closer than the matcher's shortest range: the
+        // front window is blind, the side windows see the wall's ends at 0.4 m. That is a
+        // blocked front: the robot stands, then tries the other side (half a turn back),
+        // and never drives forward into the wall.
+        let p = PulseTable::default();
+        let mut nav = navigator_without_map();
+        let left_turn = windows_ft(2.569, 2.258, 1.760);
+        // The side windows' ranges change as the camera turns (an unchanged view while
+        // turning means wedged).
+        let blind_ahead = [0.4, 0.45].map(|r| [window(r, 60), window(0.0, 0), window(r, 60)]);
+        let mut t = 0u64;
+        let mut commands = Vec::new();
+        for i in 0..120 {
+            t += 66_666_667;
+            let view = if i == 0 {
+                &left_turn
+            } else {
+                &blind_ahead[i % 2]
+            };
+            let d = nav.decide(view, 3, &ObstacleScan::default(), t);
+            send_at_once(&mut nav, &p, t, d.command, 0);
+            commands.push(d.command);
+            if d.command == MotionCommand::Right {
+                break;
+            }
+        }
+        assert_eq!(commands[0], MotionCommand::Left);
+        assert_eq!(commands.last(), Some(&MotionCommand::Right), "{commands:?}");
+        assert!(
+            !commands.contains(&MotionCommand::Forward),
+            "drove on blind: {commands:?}"
+        );
+    }
+
+    #[test]
+    fn a_pinned_robot_is_noticed_through_a_window_whose_range_jumps() {
+        // Pinned at a corner (measured in the maze): the right window's range jumps between
+        // 0.38 and 0.67 m from frame to frame (few valid pixels), its nearest points stay at
+        // 0.37 m, and the other windows hold still. The wheels drive; the robot must be
+        // taken for wedged (with the ranges compared it never was: every jump counted as a
+        // changed view).
+        let p = PulseTable::default();
+        let mut nav = navigator_without_map();
+        let jumpy = |range_m: f32| RangeWindow {
+            range_m,
+            near_m: 0.37,
+            mean_m: range_m,
+            valid_px: 80,
+            confidence: 0.3,
+            source: RangeSource::Lo as u32,
+        };
+        let mut t = 0u64;
+        let wedged = (0..60).any(|i| {
+            t += 66_666_667;
+            let view = [
+                window(2.95, 380),
+                window(2.78, 410),
+                jumpy([0.44, 0.67, 0.38, 0.5][i % 4]),
+            ];
+            let d = nav.decide(&view, 3, &ObstacleScan::default(), t);
+            send_at_once(&mut nav, &p, t, MotionCommand::Forward, 0);
+            d.command == MotionCommand::Reverse
+        });
+        assert!(wedged, "never taken for wedged");
     }
 
     #[test]
