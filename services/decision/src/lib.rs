@@ -1172,9 +1172,19 @@ impl Navigator {
                 )
                 .occupied
                 == 0;
-            if offset > LINE_UP_TOLERANCE_M && path_clear {
+            // With something in the way (the front wall, when the opening's middle is
+            // placed too near it), as far as the front wall allows a turn: turning at once
+            // put the robot 0.45 m short of a corridor's middle, and it hit the end of the
+            // corridor's wall.
+            let reach = if path_clear {
+                Some(offset)
+            } else {
+                self.front_clearance_m(&pose)
+                    .map(|c| (c - CORNER_TURN_CLEARANCE_M).min(offset))
+            };
+            if let Some(reach) = reach.filter(|&r| r > LINE_UP_TOLERANCE_M) {
                 self.maneuver = Maneuver::Creep {
-                    until_m: self.odometry.distance_m() + offset,
+                    until_m: self.odometry.distance_m() + reach,
                 };
                 self.current = MotionCommand::Forward;
                 return decision(MotionCommand::Forward, 0.0, 0, intersection);

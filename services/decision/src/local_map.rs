@@ -13,12 +13,14 @@ use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
 
 use crate::odometry::DeadReckonedPose;
 
-/// Log-odds added to a cell that holds a scan point.
-const HIT: f32 = 0.9;
+/// Log-odds added to a cell that holds a scan point: two make an unseen cell occupied (with
+/// one, a stray scan point made a phantom wall that kept the robot from lining up with an
+/// opening, and it turned off the opening into a wall stub).
+const HIT: f32 = 0.5;
 /// Log-odds added to a cell a scan ray passed through.
 const MISS: f32 = -0.4;
 /// Log-odds limits (a wall can be cleared by about 8 frames of free rays, a free cell made
-/// occupied by 3 hits).
+/// occupied by 6 hits).
 const LOG_ODDS_MIN: f32 = -2.0;
 const LOG_ODDS_MAX: f32 = 3.5;
 /// A cell is occupied above this log-odds and free below its negative.
@@ -492,6 +494,15 @@ mod tests {
             near.is_some_and(|(a, l)| (1.15..=1.3).contains(&a) && l.abs() < 0.1),
             "{near:?}"
         );
+    }
+
+    #[test]
+    fn one_stray_scan_point_does_not_make_a_wall_two_do() {
+        let mut map = LocalMap::new(0.1, 10.0);
+        map.update((3, 4), HIT, 1);
+        assert_eq!(map.state(0.35, 0.45, 1), CellState::Unknown);
+        map.update((3, 4), HIT, 2);
+        assert_eq!(map.state(0.35, 0.45, 2), CellState::Occupied);
     }
 
     #[test]
