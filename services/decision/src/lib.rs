@@ -1108,6 +1108,8 @@ impl Navigator {
                 })
                 .unwrap_or(first),
         };
+        // The local map's free way ahead (the dead-end look and the line-up use it).
+        let clearance = self.front_clearance_m(&pose);
         // A dead end read from the approach may have an opening beside the front wall: the
         // side window sees the hallway's wall converge on the front wall up to the corner,
         // and the camera never sees beside the robot. Unless the local map saw a wall
@@ -1116,7 +1118,7 @@ impl Navigator {
         // to be a wall from one never seen: the robot turns back as the table says.
         let mut probe_attempts = None;
         if command == MotionCommand::Reverse && self.cfg.local_map && self.cfg.snap_turn_deg > 0.0 {
-            let wall_m = FRONT_EDGE_M + self.front_clearance_m(&pose).unwrap_or(0.5);
+            let wall_m = FRONT_EDGE_M + clearance.unwrap_or(0.5);
             let unseen: Vec<(MotionCommand, bool)> =
                 [(MotionCommand::Left, true), (MotionCommand::Right, false)]
                     .into_iter()
@@ -1143,44 +1145,39 @@ impl Navigator {
             MotionCommand::Right => Some(false),
             _ => None,
         };
-        // An opening the local map has not seen beside the robot is taken for one at the
-        // corner with the front wall (the hallway ends in a crossing one, or turns): its
-        // middle is half its width from that wall, so the robot creeps on to
-        // `CORNER_TURN_CLEARANCE_M` from it before turning.
-        if let Some(left) = side
-            && self.turn_shifts == 0
-            && self.opening_offset(&pose, left).is_none()
-            && let Some(clearance) = self.front_clearance_m(&pose)
-            && clearance > CORNER_TURN_CLEARANCE_M + LINE_UP_TOLERANCE_M
-        {
-            self.maneuver = Maneuver::Creep {
-                until_m: self.odometry.distance_m() + clearance - CORNER_TURN_CLEARANCE_M,
-            };
-            self.current = MotionCommand::Forward;
-            return decision(MotionCommand::Forward, 0.0, 0, intersection);
-        }
-        if let Some(left) = side
-            && let Some(offset) = self.opening_offset(&pose, left)
-        {
-            let path_clear = self
-                .map
-                .count_region(
-                    &pose,
-                    (FRONT_EDGE_M, FRONT_EDGE_M + offset + 0.12),
-                    (-SWEEP_HALF_WIDTH_M, SWEEP_HALF_WIDTH_M),
-                    now,
-                )
-                .occupied
-                == 0;
-            // With something in the way (the front wall, when the opening's middle is
-            // placed too near it), as far as the front wall allows a turn: turning at once
-            // put the robot 0.45 m short of a corridor's middle, and it hit the end of the
-            // corridor's wall.
-            let reach = if path_clear {
-                Some(offset)
-            } else {
-                self.front_clearance_m(&pose)
-                    .map(|c| (c - CORNER_TURN_CLEARANCE_M).min(offset))
+        if let Some(left) = side {
+            let offset = self.opening_offset(&pose, left);
+            // How far to creep on before turning, if at all.
+            let reach = match offset {
+                // An opening the local map has not seen beside the robot is taken for one
+                // at the corner with the front wall (the hallway ends in a crossing one, or
+                // turns): its middle is half its width from that wall, so the robot creeps
+                // on to `CORNER_TURN_CLEARANCE_M` from it before turning.
+                None if self.turn_shifts == 0 => clearance
+                    .filter(|&c| c > CORNER_TURN_CLEARANCE_M + LINE_UP_TOLERANCE_M)
+                    .map(|c| c - CORNER_TURN_CLEARANCE_M),
+                None => None,
+                Some(offset) => {
+                    let path_clear = self
+                        .map
+                        .count_region(
+                            &pose,
+                            (FRONT_EDGE_M, FRONT_EDGE_M + offset + 0.12),
+                            (-SWEEP_HALF_WIDTH_M, SWEEP_HALF_WIDTH_M),
+                            now,
+                        )
+                        .occupied
+                        == 0;
+                    // With something in the way (the front wall, when the opening's middle
+                    // is placed too near it), as far as the front wall allows a turn:
+                    // turning at once put the robot 0.45 m short of a corridor's middle, and
+                    // it hit the end of the corridor's wall.
+                    if path_clear {
+                        Some(offset)
+                    } else {
+                        clearance.map(|c| (c - CORNER_TURN_CLEARANCE_M).min(offset))
+                    }
+                }
             };
             if let Some(reach) = reach.filter(|&r| r > LINE_UP_TOLERANCE_M) {
                 self.maneuver = Maneuver::Creep {
@@ -1189,7 +1186,7 @@ impl Navigator {
                 self.current = MotionCommand::Forward;
                 return decision(MotionCommand::Forward, 0.0, 0, intersection);
             }
-            if offset < -LINE_UP_TOLERANCE_M {
+            if let Some(offset) = offset.filter(|&o| o < -LINE_UP_TOLERANCE_M) {
                 self.maneuver = Maneuver::Backup {
                     until_m: self.odometry.distance_m() - offset,
                 };
