@@ -19,6 +19,7 @@
 pub mod local_map;
 pub mod odometry;
 
+use std::cell::Cell;
 use std::collections::{HashMap, HashSet};
 
 use hvs_shared::config::{DecisionConfig, DecisionPolicy, PulseTable, WallThresholds};
@@ -609,6 +610,11 @@ pub struct Navigator {
     last_heading_rad: f64,
     /// What the obstacle scans showed around the robot.
     map: LocalMap,
+    /// The last `front_clearance_m` answer and the pose it was for. The junction
+    /// classification, the side-branch look and the line-up each ask for it (through
+    /// `opening_offset`), up to five times a frame, and neither the map nor the clock changes
+    /// in between; it is forgotten when a frame begins.
+    front_clearance: Cell<Option<(DeadReckonedPose, Option<f64>)>>,
     /// The camera's distance ahead of the turning centre, metres.
     camera_forward_m: f64,
     /// Time of the decision being made.
@@ -646,6 +652,7 @@ impl Navigator {
             blind_turn_rad: 0.0,
             last_heading_rad: 0.0,
             map: LocalMap::new(cfg.local_map_cell_m, cfg.local_map_age_s),
+            front_clearance: Cell::new(None),
             camera_forward_m: 0.2,
             now_ns: 0,
             next_correction_m: 0.0,
@@ -712,6 +719,7 @@ impl Navigator {
     ) -> NavDecision {
         self.odometry.advance_to(now_ns);
         self.now_ns = now_ns;
+        self.front_clearance.set(None);
         // The walls fix the heading only while the front window sees something: facing a
         // wall closer than the matcher's shortest range, the few points left are noise
         // (measured: a 19 degree wrong fix while standing at a dead end's wall).
@@ -1399,7 +1407,12 @@ impl Navigator {
     /// How far ahead of the robot's front edge the local map holds an obstacle in the
     /// corridor it sweeps (up to 1.5 m, in 0.05 m steps), if it holds one.
     fn front_clearance_m(&self, pose: &DeadReckonedPose) -> Option<f64> {
-        (0..=30).map(|k| k as f64 * 0.05).find(|&d| {
+        if let Some((asked, clearance)) = self.front_clearance.get()
+            && asked == *pose
+        {
+            return clearance;
+        }
+        let clearance = (0..=30).map(|k| k as f64 * 0.05).find(|&d| {
             self.map
                 .count_region(
                     pose,
@@ -1409,7 +1422,9 @@ impl Navigator {
                 )
                 .occupied
                 >= 2
-        })
+        });
+        self.front_clearance.set(Some((*pose, clearance)));
+        clearance
     }
 
     /// Whether the local map saw a wall beside the robot (left or right, 0.35..0.8 m from
