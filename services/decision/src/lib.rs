@@ -2012,6 +2012,98 @@ mod tests {
         assert!(heading_deg.abs() < 5.0, "heading {heading_deg} degrees");
     }
 
+    /// The scan the camera (`forward_m` ahead of the turning centre at `pose`) sees of walls
+    /// along the x axis, each at `y` from `x` on (`side_walls`: `(y_m, from_x_m)`), and of a
+    /// front wall at `x = front_x_m`.
+    fn scan_of_hallway(
+        pose: DeadReckonedPose,
+        forward_m: f64,
+        side_walls: &[(f64, f64)],
+        front_x_m: f64,
+    ) -> ObstacleScan {
+        let mut scan = ObstacleScan {
+            tan_half_fov: 0.5,
+            ..ObstacleScan::default()
+        };
+        let (s, c) = pose.heading_rad.sin_cos();
+        let cam = (pose.x_m + forward_m * c, pose.y_m + forward_m * s);
+        for i in 0..hvs_shared::messages::SCAN_BINS {
+            let bearing = scan.bin_tangent(i).atan();
+            let (ds, dc) = (pose.heading_rad + bearing).sin_cos();
+            let mut along = f64::INFINITY;
+            for &(wall_y_m, from_x_m) in side_walls {
+                let d = (wall_y_m - cam.1) / ds;
+                if ds.abs() > 1e-6 && d > 0.0 && cam.0 + d * dc >= from_x_m {
+                    along = along.min(d);
+                }
+            }
+            if dc > 1e-6 {
+                along = along.min((front_x_m - cam.0) / dc);
+            }
+            if along.is_finite() {
+                scan.range_m[i] = (along * bearing.cos()) as f32;
+            }
+        }
+        scan
+    }
+
+    #[test]
+    fn a_robot_off_the_hallways_middle_bends_away_from_a_wall_that_starts_beside_it() {
+        // The robot drives down +x 0.25 m from a wall on its left that starts at x = 0.6 m
+        // (it turned into the hallway off its middle: the hallway behind it is open on the
+        // left), 0.8 m from the hallway's other wall. Once the local map holds the left wall
+        // beside it, it bends right, towards the middle, and neither stops nor turns a
+        // junction's quarter turn into the wall.
+        let p = PulseTable::default();
+        let cfg = DecisionConfig {
+            local_map: true,
+            ..DecisionConfig::default()
+        };
+        let mut nav = Navigator::new(&cfg, &p);
+        let start_x_m = -2.5;
+        let mut t = 0u64;
+        let mut commands = Vec::new();
+        let mut nearest_m = f64::INFINITY;
+        for _ in 0..400 {
+            let pose = nav.pose();
+            let at = DeadReckonedPose {
+                x_m: pose.x_m + start_x_m,
+                ..pose
+            };
+            if at.x_m >= 1.2 {
+                break;
+            }
+            t += 66_666_667;
+            let scan = scan_of_hallway(at, 0.2, &[(0.25, 0.6), (-0.8, -5.0)], 6.0);
+            // Each window's median range (a third of the scan's bins each, left first).
+            let windows = [0, 1, 2].map(|k| {
+                let third = hvs_shared::messages::SCAN_BINS / 3;
+                let mut bins = scan.range_m[k * third..(k + 1) * third].to_vec();
+                bins.sort_by(f32::total_cmp);
+                window(f64::from(bins[bins.len() / 2]), 150)
+            });
+            let d = nav.decide(&windows, 3, &scan, t);
+            send_at_once(&mut nav, &p, t, d.command, 0);
+            commands.push((d.command, d.turn_angle_deg.round()));
+            assert!(
+                d.turn_angle_deg <= 20.0
+                    && !matches!(d.command, MotionCommand::Stop | MotionCommand::Reverse)
+                    || at.x_m < -2.3,
+                "{:?} at {at:?}: {commands:?}",
+                d.intersection,
+            );
+            if at.x_m > 0.6 {
+                nearest_m = nearest_m.min(0.25 - at.y_m);
+            }
+        }
+        let end = nav.pose();
+        assert!(end.x_m + start_x_m >= 1.2, "{end:?}: {commands:?}");
+        // The robot never came nearer the wall than it started (its side is 0.155 m from its
+        // centre), and it ends further from it.
+        assert!(nearest_m >= 0.24, "{nearest_m}: {commands:?}");
+        assert!(end.y_m < -0.05, "{end:?}: {commands:?}");
+    }
+
     #[test]
     fn a_turn_that_ends_blind_ahead_is_not_driven_on() {
         // A left turn ends facing a wall closer than the matcher's shortest range: the
