@@ -2085,6 +2085,7 @@ mod tests {
             let d = nav.decide(&windows, 3, &scan, t);
             send_at_once(&mut nav, &p, t, d.command, 0);
             commands.push((d.command, d.turn_angle_deg.round()));
+            // (It stands for its first frames: a command must be proposed `hold_frames` times.)
             assert!(
                 d.turn_angle_deg <= 20.0
                     && !matches!(d.command, MotionCommand::Stop | MotionCommand::Reverse)
