@@ -2012,41 +2012,6 @@ mod tests {
         assert!(heading_deg.abs() < 5.0, "heading {heading_deg} degrees");
     }
 
-    /// The scan the camera (`forward_m` ahead of the turning centre at `pose`) sees of walls
-    /// along the x axis, each at `y` from `x` on (`side_walls`: `(y_m, from_x_m)`), and of a
-    /// front wall at `x = front_x_m`.
-    fn scan_of_hallway(
-        pose: DeadReckonedPose,
-        forward_m: f64,
-        side_walls: &[(f64, f64)],
-        front_x_m: f64,
-    ) -> ObstacleScan {
-        let mut scan = ObstacleScan {
-            tan_half_fov: 0.5,
-            ..ObstacleScan::default()
-        };
-        let (s, c) = pose.heading_rad.sin_cos();
-        let cam = (pose.x_m + forward_m * c, pose.y_m + forward_m * s);
-        for i in 0..hvs_shared::messages::SCAN_BINS {
-            let bearing = scan.bin_tangent(i).atan();
-            let (ds, dc) = (pose.heading_rad + bearing).sin_cos();
-            let mut along = f64::INFINITY;
-            for &(wall_y_m, from_x_m) in side_walls {
-                let d = (wall_y_m - cam.1) / ds;
-                if ds.abs() > 1e-6 && d > 0.0 && cam.0 + d * dc >= from_x_m {
-                    along = along.min(d);
-                }
-            }
-            if dc > 1e-6 {
-                along = along.min((front_x_m - cam.0) / dc);
-            }
-            if along.is_finite() {
-                scan.range_m[i] = (along * bearing.cos()) as f32;
-            }
-        }
-        scan
-    }
-
     #[test]
     fn a_robot_off_the_hallways_middle_bends_away_from_a_wall_that_starts_beside_it() {
         // The robot drives down +x 0.25 m from a wall on its left that starts at x = 0.6 m
@@ -2074,7 +2039,8 @@ mod tests {
                 break;
             }
             t += 66_666_667;
-            let scan = scan_of_hallway(at, 0.2, &[(0.25, 0.6), (-0.8, -5.0)], 6.0);
+            let scan =
+                local_map::test_scans::scan_of_hallway(at, 0.2, &[(0.25, 0.6), (-0.8, -5.0)], 6.0);
             // Each window's median range (a third of the scan's bins each, left first).
             let windows = [0, 1, 2].map(|k| {
                 let third = hvs_shared::messages::SCAN_BINS / 3;

@@ -422,6 +422,47 @@ pub fn wall_direction(scan: &ObstacleScan, max_m: f64, min_votes: usize) -> Opti
     Some(a4 / 4.0)
 }
 
+/// Synthetic obstacle scans for the tests of this module and of the navigator.
+#[cfg(test)]
+pub(crate) mod test_scans {
+    use super::*;
+
+    /// The scan the camera (`forward_m` ahead of the turning centre at `pose`) sees of walls
+    /// along the x axis, each at `y` from `x` on (`side_walls`: `(y_m, from_x_m)`), and of a
+    /// front wall at `x = front_x_m`.
+    pub(crate) fn scan_of_hallway(
+        pose: DeadReckonedPose,
+        forward_m: f64,
+        side_walls: &[(f64, f64)],
+        front_x_m: f64,
+    ) -> ObstacleScan {
+        let mut scan = ObstacleScan {
+            tan_half_fov: 0.5,
+            ..ObstacleScan::default()
+        };
+        let (s, c) = pose.heading_rad.sin_cos();
+        let cam = (pose.x_m + forward_m * c, pose.y_m + forward_m * s);
+        for i in 0..SCAN_BINS {
+            let bearing = scan.bin_tangent(i).atan();
+            let (ds, dc) = (pose.heading_rad + bearing).sin_cos();
+            let mut along = f64::INFINITY;
+            for &(wall_y_m, from_x_m) in side_walls {
+                let d = (wall_y_m - cam.1) / ds;
+                if ds.abs() > 1e-6 && d > 0.0 && cam.0 + d * dc >= from_x_m {
+                    along = along.min(d);
+                }
+            }
+            if dc > 1e-6 {
+                along = along.min((front_x_m - cam.0) / dc);
+            }
+            if along.is_finite() {
+                scan.range_m[i] = (along * bearing.cos()) as f32;
+            }
+        }
+        scan
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -576,24 +617,13 @@ mod tests {
         };
         let mut now_ns = 1;
         while pose.x_m < 1.5 {
-            let cam = (
-                pose.x_m + CAMERA_FORWARD_M * yaw_rad.cos(),
-                pose.y_m + CAMERA_FORWARD_M * yaw_rad.sin(),
+            // The side wall runs along the whole drive.
+            let scan = test_scans::scan_of_hallway(
+                pose,
+                CAMERA_FORWARD_M,
+                &[(wall_y_m, f64::NEG_INFINITY)],
+                4.0,
             );
-            let mut scan = ObstacleScan {
-                tan_half_fov: 0.5,
-                ..ObstacleScan::default()
-            };
-            for i in 0..SCAN_BINS {
-                let bearing = scan.bin_tangent(i).atan();
-                let (s, c) = (yaw_rad + bearing).sin_cos();
-                let along = [(wall_y_m - cam.1, s), (4.0 - cam.0, c)]
-                    .into_iter()
-                    .filter(|&(_, k)| k > 1e-6)
-                    .map(|(d, k)| d / k)
-                    .fold(f64::INFINITY, f64::min);
-                scan.range_m[i] = (along * bearing.cos()) as f32;
-            }
             map.insert_scan(&pose, CAMERA_FORWARD_M, &scan, 3.0, now_ns);
             now_ns += 66_000_000;
             pose.x_m += 0.02 * yaw_rad.cos();
