@@ -36,6 +36,8 @@ pub const SCAN_BINS: usize = 64;
 pub const NAME_LEN: usize = 32;
 /// Maximum number of stages a [`SupervisorStatus`] lists.
 pub const MAX_STAGES: usize = 12;
+/// Length of a stage's free-text status note (heartbeat and status entry), bytes.
+pub const NOTE_LEN: usize = 96;
 
 /// Encodes `name` into a NUL-padded fixed array, truncating at a UTF-8 boundary if too long.
 pub fn encode_name<const N: usize>(name: &str) -> [u8; N] {
@@ -728,8 +730,9 @@ pub struct StageHeartbeat {
     pub health: u32,
     /// Stage name, NUL-padded.
     pub stage: [u8; NAME_LEN],
-    /// Free-text status note, NUL-padded (for example the device in use).
-    pub note: [u8; 64],
+    /// Free-text status note, NUL-padded (for example the device in use, or what the stage
+    /// waits for: "no servo controller answers on /dev/ttyUSB0 (waiting 12 s)").
+    pub note: [u8; NOTE_LEN],
 }
 
 impl Sequenced for StageHeartbeat {
@@ -857,10 +860,16 @@ pub struct StageStatusEntry {
     pub heartbeat_age_ms: u32,
     /// Exit status of the last incarnation (-signal if killed, 0 if none yet).
     pub last_exit: i32,
+    /// [`StageHealth`] code of the newest heartbeat (0 before the first).
+    pub health: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// The newest heartbeat's note, NUL-padded.
+    pub note: [u8; NOTE_LEN],
 }
 
 /// The supervisor's view of the whole pipeline, published once a second with history 1 so
-/// `hvs status` and probes get it at once (1 208 bytes).
+/// `hvs status` and probes get it at once (2 456 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
 #[type_name("hvs::SupervisorStatus")]
@@ -953,10 +962,10 @@ mod tests {
         assert_eq!(size_of::<ObstacleScan>(), 264);
         assert_eq!(size_of::<Decision>(), 64);
         assert_eq!(size_of::<ActuatorReport>(), 72);
-        assert_eq!(size_of::<StageHeartbeat>(), 184);
+        assert_eq!(size_of::<StageHeartbeat>(), 216);
         assert_eq!(size_of::<SimTruth>(), 88);
-        assert_eq!(size_of::<StageStatusEntry>(), 96);
-        assert_eq!(size_of::<SupervisorStatus>(), 56 + 12 * 96);
+        assert_eq!(size_of::<StageStatusEntry>(), 200);
+        assert_eq!(size_of::<SupervisorStatus>(), 56 + 12 * 200);
         assert_eq!(size_of::<ControlRequest>(), 48);
     }
 

@@ -22,7 +22,7 @@ use crate::config::{ConfigError, HvsConfig, validate_instance_name};
 use crate::ipc::{
     IpcNode, IpcService, NodeOpenError, PublishError, TopicOpenError, TopicPublisher,
 };
-use crate::messages::{NAME_LEN, StageHealth, StageHeartbeat, encode_name};
+use crate::messages::{NAME_LEN, NOTE_LEN, StageHealth, StageHeartbeat, encode_name};
 use crate::stats::{LatencySummary, LatencyWindow};
 use crate::topics;
 
@@ -233,7 +233,7 @@ impl StageRuntime {
         self.health = health;
     }
 
-    /// Sets the free-text note reported in heartbeats (truncated to 64 bytes).
+    /// Sets the free-text note reported in heartbeats (truncated to 96 bytes).
     pub fn set_note(&mut self, note: impl Into<String>) {
         self.note = note.into();
     }
@@ -279,7 +279,7 @@ impl StageRuntime {
             pid: std::process::id(),
             health: self.health as u32,
             stage: [0; NAME_LEN],
-            note: [0; 64],
+            note: [0; NOTE_LEN],
         };
         hb.stage = encode_name(&self.stage);
         hb.note = encode_name(&self.note);

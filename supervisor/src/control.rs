@@ -7,8 +7,8 @@ use anyhow::{Context, bail};
 use hvs_shared::config::STAGE_NAMES;
 use hvs_shared::ipc::{IpcNode, TopicOpenError, TopicPublisher, TopicSubscriber};
 use hvs_shared::messages::{
-    ControlCommand, ControlRequest, MotionCommand, NAME_LEN, StageState, SupervisorStatus,
-    decode_name, encode_name,
+    ControlCommand, ControlRequest, MotionCommand, NAME_LEN, StageHealth, StageState,
+    SupervisorStatus, decode_name, encode_name,
 };
 use hvs_shared::topics;
 use serde::Serialize;
@@ -82,6 +82,10 @@ pub struct StageLine {
     pub heartbeat_age_ms: u32,
     /// Last exit status.
     pub last_exit: i32,
+    /// Health the stage reports ("running", "degraded", ...; empty before its first beat).
+    pub health: String,
+    /// The stage's own note: the device in use, or what it waits for.
+    pub note: String,
 }
 
 /// `hvs status --json`.
@@ -123,6 +127,10 @@ fn to_json(instance: &str, s: &SupervisorStatus) -> StatusJson {
             drops: e.drops,
             heartbeat_age_ms: e.heartbeat_age_ms,
             last_exit: e.last_exit,
+            health: StageHealth::from_code(e.health)
+                .map_or("", |h| h.label())
+                .to_string(),
+            note: decode_name(&e.note).to_string(),
         })
         .collect();
     StatusJson {
@@ -163,7 +171,7 @@ pub fn status(instance: &str, json: bool) -> anyhow::Result<()> {
         s.decision_latency_p99_ms
     );
     println!(
-        "{:<10} {:>7} {:<9} {:>8} {:>8} {:>17} {:>9} {:>9} {:>7} {:>8}",
+        "{:<10} {:>7} {:<9} {:>8} {:>8} {:>17} {:>9} {:>9} {:>7} {:>8}  NOTE",
         "STAGE",
         "PID",
         "STATE",
@@ -182,7 +190,7 @@ pub fn status(instance: &str, json: bool) -> anyhow::Result<()> {
             format!("{} ms", st.heartbeat_age_ms)
         };
         println!(
-            "{:<10} {:>7} {:<9} {:>8} {:>8.1} {:>7.2}/{:<6.2} ms {:>9} {:>9} {:>7} {:>8}",
+            "{:<10} {:>7} {:<9} {:>8} {:>8.1} {:>7.2}/{:<6.2} ms {:>9} {:>9} {:>7} {:>8}  {}",
             st.stage,
             st.pid,
             st.state,
@@ -193,7 +201,8 @@ pub fn status(instance: &str, json: bool) -> anyhow::Result<()> {
             st.frames_in,
             st.frames_out,
             st.drops,
-            hb
+            hb,
+            st.note
         );
     }
     Ok(())

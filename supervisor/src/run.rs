@@ -14,11 +14,12 @@ use std::process::Child;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use bytemuck::Zeroable;
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::config::{CaptureSource, HvsConfig, RestartPolicy, StageSpec, run_dir};
 use hvs_shared::ipc::{IpcNode, TopicPublisher, TopicSubscriber};
 use hvs_shared::messages::{
-    ActuatorReport, ControlCommand, Decision, MAX_STAGES, MotionCommand, NAME_LEN, SendReason,
+    ActuatorReport, ControlCommand, Decision, MAX_STAGES, MotionCommand, NOTE_LEN, SendReason,
     SimTruth, StageHealth, StageHeartbeat, StageState, StageStatusEntry, SupervisorStatus,
     decode_name, encode_name,
 };
@@ -168,6 +169,8 @@ struct Slot {
     spawned_at: Instant,
     last_heartbeat: Option<Instant>,
     health: Option<StageHealth>,
+    /// The newest heartbeat's note.
+    note: [u8; NOTE_LEN],
     hung: bool,
     restart_requested: bool,
     stop_deadline: Option<Instant>,
@@ -331,6 +334,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
             spawned_at: Instant::now(),
             last_heartbeat: None,
             health: None,
+            note: [0; NOTE_LEN],
             hung: false,
             restart_requested: false,
             stop_deadline: None,
@@ -521,6 +525,7 @@ impl Supervisor {
         };
         slot.spawned_at = Instant::now();
         slot.last_heartbeat = None;
+        slot.note = [0; NOTE_LEN];
         slot.health = None;
         slot.hung = false;
         slot.next_start = None;
@@ -578,6 +583,7 @@ impl Supervisor {
                 }
                 slot.last_heartbeat = Some(Instant::now());
                 slot.health = StageHealth::from_code(hb.health);
+                slot.note = hb.note;
                 slot.current = Counters::from_heartbeat(hb);
                 slot.latency_p50_ns = hb.latency_p50_ns;
                 slot.latency_p99_ns = hb.latency_p99_ns;
@@ -860,20 +866,7 @@ impl Supervisor {
 
     fn publish_status(&mut self, publisher: &mut TopicPublisher<SupervisorStatus>, stopping: bool) {
         let lat = self.decision_latency.summary();
-        let mut entries = [StageStatusEntry {
-            stage: [0; NAME_LEN],
-            frames_in: 0,
-            frames_out: 0,
-            drops: 0,
-            latency_p50_ns: 0,
-            latency_p99_ns: 0,
-            pid: 0,
-            state: 0,
-            restarts: 0,
-            rate_hz: 0.0,
-            heartbeat_age_ms: 0,
-            last_exit: 0,
-        }; MAX_STAGES];
+        let mut entries = [StageStatusEntry::zeroed(); MAX_STAGES];
         for (e, s) in entries.iter_mut().zip(&self.slots) {
             let t = s.totals();
             *e = StageStatusEntry {
@@ -891,6 +884,9 @@ impl Supervisor {
                     t.elapsed().as_millis().min(u32::MAX as u128) as u32
                 }),
                 last_exit: s.last_exit,
+                health: s.health.map_or(0, |h| h as u32),
+                reserved: 0,
+                note: s.note,
             };
         }
         self.status_seq += 1;

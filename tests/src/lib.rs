@@ -330,4 +330,6 @@ pub fn signal_pid(pid: u32, signal: Signal) {
         .unwrap_or_else(|e| panic!("signal {signal} to {pid}: {e}"));
 }
 
+pub mod psc_peer;
+
 pub use hvs_shared::ipc::iceoryx_files;

@@ -5,6 +5,7 @@
 //! prints the table of docs/bad-input.md.
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use hvs_capture::calib::{StereoCalibration, StereoRectifier};
 use hvs_capture::replay::ReplayIndex;
@@ -444,7 +445,7 @@ fn file_rows(dir: &Path) -> Vec<Row> {
         rows.push(Row::of(
             "serial link (actuator)",
             what,
-            hvs_actuator::link::PscLink::open(&device, 2400, true, false),
+            hvs_actuator::link::check_controller(&device, 2400, Duration::from_millis(600)),
             device.display().to_string(),
         ));
     }

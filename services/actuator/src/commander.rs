@@ -58,6 +58,9 @@ pub struct Commander {
     wire_free_at_ns: u64,
     last_sent: Option<Outgoing>,
     last_sent_ns: u64,
+    /// Set when a link comes up: the controller's outputs are unknown, so neutral goes out
+    /// before any decision is acted on.
+    neutral_first: bool,
 }
 
 /// Clamps a pulse pair to the PSC range and to the span of the configured motion table.
@@ -88,6 +91,7 @@ impl Commander {
             wire_free_at_ns: 0,
             last_sent: None,
             last_sent_ns: 0,
+            neutral_first: true,
         }
     }
 
@@ -158,6 +162,9 @@ impl Commander {
         if now_ns < self.wire_free_at_ns {
             return None;
         }
+        if self.neutral_first {
+            return Some(self.neutral(SendReason::StartupNeutral));
+        }
         if self.is_stale(now_ns) {
             let reason = if self.last_sent.is_none() {
                 SendReason::StartupNeutral
@@ -192,12 +199,17 @@ impl Commander {
         self.wire_free_at_ns = now_ns + self.wire_ns;
         self.last_sent = Some(*out);
         self.last_sent_ns = now_ns;
+        if out.command == MotionCommand::Stop {
+            self.neutral_first = false;
+        }
     }
 
-    /// Forgets what was sent (after the link was reopened: the controller state is unknown).
+    /// Forgets what was sent (after the link came up again: the controller state is unknown);
+    /// the next output is neutral.
     pub fn link_reset(&mut self) {
         self.last_sent = None;
         self.wire_free_at_ns = 0;
+        self.neutral_first = true;
     }
 }
 
@@ -217,13 +229,37 @@ mod tests {
         }
     }
 
+    /// A commander whose link came up at 0 and that has sent its start-up neutral.
     fn commander() -> Commander {
-        Commander::new(&ActuatorConfig::default())
+        let mut c = Commander::new(&ActuatorConfig::default());
+        let first = c.poll(0).expect("startup neutral");
+        c.mark_sent(0, &first);
+        c
+    }
+
+    #[test]
+    fn a_link_that_comes_up_gets_neutral_before_a_fresh_decision() {
+        let mut c = commander();
+        let t0 = 1_000 * MS;
+        c.on_decision(decision(1, t0, MotionCommand::Forward));
+        let out = c.poll(t0).expect("forward");
+        c.mark_sent(t0, &out);
+        // The link went down and came up again: the controller may hold anything.
+        c.link_reset();
+        c.on_decision(decision(2, t0 + 80 * MS, MotionCommand::Left));
+        let first = c.poll(t0 + 90 * MS).expect("neutral first");
+        assert_eq!(first.reason, SendReason::StartupNeutral);
+        assert_eq!(first.command, MotionCommand::Stop);
+        c.mark_sent(t0 + 90 * MS, &first);
+        assert!(c.poll(t0 + 100 * MS).is_none(), "wire busy");
+        let next = c.poll(t0 + 157 * MS).expect("then the decision");
+        assert_eq!(next.command, MotionCommand::Left);
     }
 
     #[test]
     fn starts_with_neutral_then_follows_fresh_decisions() {
-        let mut c = commander();
+        let mut c = Commander::new(&ActuatorConfig::default());
+        c.on_decision(decision(1, 990 * MS, MotionCommand::Forward));
         let first = c.poll(1_000 * MS).expect("startup neutral");
         assert_eq!(first.reason, SendReason::StartupNeutral);
         assert_eq!((first.left_pw, first.right_pw), (760, 758));

@@ -1,11 +1,14 @@
 //! Actuator stage process: newest decision -> PSC bytes on the serial port, neutral when
-//! decisions stop, on shutdown and on errors; reconnects with backoff when the device is
-//! missing, silent or vanishes; publishes everything it wrote on `actuator/sent`.
+//! decisions stop, on shutdown and on errors. The link is a non-blocking state machine
+//! ([`PscLink`]): a missing, silent or vanished controller is waited for (and named in the
+//! heartbeat note), never a crash; when it answers, neutral goes out first. Publishes
+//! everything it wrote on `actuator/sent`.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+use hvs_actuator::link::{LinkEvent, LinkSettings};
 use hvs_actuator::{Commander, DecisionInput, Outgoing, PscLink};
 use hvs_shared::clock::monotonic_ns;
 use hvs_shared::config::sim_pty_path;
@@ -16,76 +19,72 @@ use hvs_shared::topics;
 
 /// How often the actuator wakes to check the watchdog and the wire.
 const TICK: Duration = Duration::from_millis(5);
-/// Reconnect backoff bounds.
-const BACKOFF_MIN: Duration = Duration::from_millis(200);
-const BACKOFF_MAX: Duration = Duration::from_secs(2);
 
 fn main() -> ExitCode {
     run_stage("actuator", run)
 }
 
-/// The serial link with its reconnect schedule.
+/// The link with what the stage says about it.
 struct Connection {
-    device: PathBuf,
-    exclusive: bool,
-    link: Option<PscLink>,
-    next_attempt: Instant,
-    backoff: Duration,
-    failures: u32,
+    link: PscLink,
+    /// The whole seconds last shown in the note (the note is refreshed once a second).
+    note_shown_s: Option<u64>,
+    /// When the stage started (the note's once-a-second clock).
+    started: Instant,
 }
 
 impl Connection {
-    fn ensure(&mut self, rt: &mut StageRuntime, commander: &mut Commander) {
-        if self.link.is_some() || Instant::now() < self.next_attempt {
-            return;
-        }
-        let a = &rt.config.actuator;
-        match PscLink::open(&self.device, a.baud, a.link_check, self.exclusive) {
-            Ok(link) => {
+    /// Advances the link; logs and reports state changes.
+    fn poll(&mut self, rt: &mut StageRuntime, commander: &mut Commander) {
+        let now = Instant::now();
+        match self.link.poll(now) {
+            Some(LinkEvent::Up { firmware }) => {
                 tracing::info!(
-                    "{}: link up on {} at {} baud (PSC firmware {:?})",
-                    rt.stage,
-                    self.device.display(),
-                    a.baud,
-                    link.firmware()
+                    device = %self.link.device().display(),
+                    firmware = %firmware,
+                    "servo controller answers: link up, neutral first"
                 );
-                rt.set_note(format!("{} {}", self.device.display(), link.firmware()));
                 rt.set_health(StageHealth::Running);
-                self.link = Some(link);
-                self.backoff = BACKOFF_MIN;
-                self.failures = 0;
                 commander.link_reset();
+                self.note_shown_s = None;
             }
-            Err(e) => {
-                // Warn on the first failure and then every 10th, not at every retry.
-                if self.failures.is_multiple_of(10) {
-                    tracing::warn!("{}: {e}; retrying every {:?}", rt.stage, self.backoff);
-                }
-                self.failures += 1;
-                rt.set_note(format!("waiting for {}", self.device.display()));
+            Some(LinkEvent::Waiting(e)) => {
+                tracing::warn!(state = self.link.state().label(), "{e}; waiting for it");
                 rt.set_health(StageHealth::Degraded);
-                self.next_attempt = Instant::now() + self.backoff;
-                self.backoff = (self.backoff * 2).min(BACKOFF_MAX);
+                self.note_shown_s = None;
             }
+            Some(LinkEvent::Lost(e)) => {
+                rt.count_error();
+                tracing::warn!("{e}; reopening");
+                rt.set_health(StageHealth::Degraded);
+                self.note_shown_s = None;
+            }
+            None => {}
+        }
+        // One note refresh a second: "no servo controller answers on DEV (waiting 12 s)".
+        let shown = Some(now.saturating_duration_since(self.started).as_secs());
+        if self.note_shown_s != shown {
+            self.note_shown_s = shown;
+            rt.set_note(self.link.note(now));
         }
     }
 
-    /// Writes `out`; on failure drops the link so it is reopened.
+    /// Writes `out` while the link is up; a failure takes the link down (reported).
     fn send(
         &mut self,
         rt: &mut StageRuntime,
         commander: &mut Commander,
         reports: &mut TopicPublisher<ActuatorReport>,
         out: &Outgoing,
-    ) {
-        let Some(link) = self.link.as_mut() else {
-            return;
-        };
-        if let Err(e) = link.write(&out.bytes) {
+    ) -> bool {
+        if !self.link.is_up() {
+            return false;
+        }
+        if let Err(e) = self.link.send(&out.bytes, Instant::now()) {
             rt.report_error("serial link lost", &e);
-            self.link = None;
-            self.next_attempt = Instant::now() + BACKOFF_MIN;
-            return;
+            rt.set_health(StageHealth::Degraded);
+            self.note_shown_s = None;
+            return false;
         }
         let now = monotonic_ns();
         commander.mark_sent(now, out);
@@ -110,8 +109,9 @@ impl Connection {
             Err(e) => rt.report_publish_error(&e),
         }
         if out.reason == SendReason::WatchdogNeutral {
-            tracing::debug!("{}: watchdog: no fresh decision, neutral sent", rt.stage);
+            tracing::debug!("watchdog: no fresh decision, neutral sent");
         }
+        true
     }
 }
 
@@ -136,16 +136,22 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     );
     let mut commander = Commander::new(&cfg);
     let mut conn = Connection {
-        device,
-        // A real controller is ours alone; the simulator's pty stays shareable so that a
-        // restarted actuator is never locked out by its killed predecessor's TIOCEXCL.
-        exclusive: !is_sim,
-        link: None,
-        next_attempt: Instant::now(),
-        backoff: BACKOFF_MIN,
-        failures: 0,
+        link: PscLink::new(
+            LinkSettings {
+                device,
+                baud: cfg.baud,
+                check: cfg.link_check,
+                // A real controller is ours alone; the simulator's pty stays shareable so
+                // that a restarted actuator is never locked out by its killed predecessor's
+                // TIOCEXCL.
+                exclusive: !is_sim,
+            },
+            Instant::now(),
+        ),
+        note_shown_s: None,
+        started: Instant::now(),
     };
-    conn.ensure(rt, &mut commander);
+    conn.poll(rt, &mut commander);
 
     let waitset = rt.waitset()?;
     let decisions_guard = waitset
@@ -171,8 +177,11 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             }
             rt.set_drops(decisions.dropped());
         }
-        conn.ensure(rt, &mut commander);
-        if let Some(out) = commander.poll(monotonic_ns()) {
+        conn.poll(rt, &mut commander);
+        // Nothing but version queries goes out before the controller answers.
+        if conn.link.is_up()
+            && let Some(out) = commander.poll(monotonic_ns())
+        {
             conn.send(rt, &mut commander, &mut reports, &out);
         }
         Ok(LoopControl::Continue)
@@ -185,12 +194,14 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         SendReason::ErrorNeutral
     };
     let neutral = commander.neutral(reason);
-    conn.send(rt, &mut commander, &mut reports, &neutral);
-    if let Some(link) = conn.link.as_mut() {
-        link.drain();
-        tracing::info!("{}: neutral sent ({:?})", rt.stage, reason);
+    if conn.send(rt, &mut commander, &mut reports, &neutral) {
+        conn.link.drain();
+        tracing::info!(?reason, "neutral sent");
     } else {
-        tracing::warn!("{}: link down, could not send neutral on exit", rt.stage);
+        tracing::warn!(
+            device = %conn.link.device().display(),
+            "link not up, no neutral sent on exit"
+        );
     }
     result
 }
