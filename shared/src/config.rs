@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::messages::StereoAlgorithm;
+use crate::topics;
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -247,6 +248,75 @@ pub struct V4l2CaptureConfig {
     pub reconnect_backoff_ms: u64,
     /// Longest delay between reconnection attempts, ms.
     pub reconnect_max_backoff_ms: u64,
+    /// Image controls locked to the same values on both cameras (unset: the cameras'
+    /// automatic modes stay on).
+    pub controls: V4l2Controls,
+}
+
+/// Power-line frequency for the cameras' anti-flicker filter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PowerLine {
+    /// Filter off.
+    Off,
+    /// 50 Hz mains (Europe, most of Asia and Africa).
+    #[serde(rename = "50hz")]
+    Hz50,
+    /// 60 Hz mains (the Americas, parts of Asia).
+    #[serde(rename = "60hz")]
+    Hz60,
+}
+
+/// V4L2 controls set on both cameras when the capture opens them. The reference blamed
+/// flicker and unequal intensities for bad matches: with these set, both sensors expose,
+/// amplify and white-balance alike.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct V4l2Controls {
+    /// Manual exposure in the driver's unit (UVC: 100 us), automatic exposure off.
+    pub exposure_100us: Option<i32>,
+    /// Manual gain (driver units), automatic gain off.
+    pub gain: Option<i32>,
+    /// Manual white balance, kelvin, automatic white balance off.
+    pub white_balance_k: Option<i32>,
+    /// Anti-flicker filter for the mains frequency of the lights.
+    pub power_line: Option<PowerLine>,
+}
+
+impl V4l2Controls {
+    /// Checks plausible ranges (each camera's own range is checked when it is set).
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if let Some(e) = self.exposure_100us
+            && !(1..=100_000).contains(&e)
+        {
+            return Err((
+                "capture.v4l2.controls.exposure_100us",
+                format!("= {e} must be in 1..=100000 (0.1 ms .. 10 s)"),
+            ));
+        }
+        if let Some(g) = self.gain
+            && !(0..=10_000).contains(&g)
+        {
+            return Err((
+                "capture.v4l2.controls.gain",
+                format!("= {g} must be in 0..=10000"),
+            ));
+        }
+        if let Some(k) = self.white_balance_k
+            && !(1000..=12_000).contains(&k)
+        {
+            return Err((
+                "capture.v4l2.controls.white_balance_k",
+                format!("= {k} must be in 1000..=12000 kelvin"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// True when no control is set.
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 impl Default for V4l2CaptureConfig {
@@ -260,6 +330,7 @@ impl Default for V4l2CaptureConfig {
             stall_timeout_ms: 2000,
             reconnect_backoff_ms: 250,
             reconnect_max_backoff_ms: 5000,
+            controls: V4l2Controls::default(),
         }
     }
 }
@@ -1219,6 +1290,12 @@ impl HvsConfig {
             ));
         }
         self.validate_capture()?;
+        self.validate_stage_names()?;
+        self.validate_flow()?;
+        Ok(())
+    }
+
+    fn validate_stage_names(&self) -> Result<(), ConfigError> {
         for (name, o) in &self.stages {
             if !STAGE_NAMES.contains(&name.as_str()) {
                 return Err(self.invalid(
@@ -1266,6 +1343,74 @@ impl HvsConfig {
         Ok(())
     }
 
+    /// The pre-start check of the data flow ([`topics::STAGE_INPUTS`]): a frame source
+    /// exists, every enabled stage's inputs have an enabled publisher, the actuator's device
+    /// can exist. Errors name the keys to change.
+    fn validate_flow(&self) -> Result<(), ConfigError> {
+        let source = self.capture.source;
+        for input in topics::STAGE_INPUTS {
+            if !self.stage_enabled(input.stage) {
+                continue;
+            }
+            if input.stage == "capture" && source != CaptureSource::Sim {
+                continue;
+            }
+            let capture_size = format!("{}x{}", self.capture.width, self.capture.height);
+            let hi_published = matches!(source, CaptureSource::Sim | CaptureSource::Replay)
+                || capture_size == "640x480";
+            if input.topic == topics::FRAMES_HI.path
+                && self.stage_enabled("capture")
+                && !hi_published
+            {
+                return Err(self.invalid(
+                    "stages.stereo-hi.enabled",
+                    format!(
+                        "stereo-hi reads {} but capture.width = {}, height = {} publishes only {}; \
+                         set [stages.stereo-hi] enabled = false, or capture at 640x480",
+                        input.topic,
+                        self.capture.width,
+                        self.capture.height,
+                        topics::FRAMES_LO.path
+                    ),
+                ));
+            }
+            if self.stage_enabled(input.publisher) {
+                continue;
+            }
+            let message = if input.stage == "capture" {
+                format!(
+                    "capture.source = \"sim\" reads {} from the sim stage, but [stages.sim] \
+                     enabled = false: no stage produces a frame (enable the sim stage, or set \
+                     capture.source to \"v4l2\", \"files\" or \"replay\")",
+                    input.topic
+                )
+            } else {
+                format!(
+                    "{} reads {}, which only {} publishes, and [stages.{}] enabled = false \
+                     (enable {}, or disable {})",
+                    input.stage,
+                    input.topic,
+                    input.publisher,
+                    input.publisher,
+                    input.publisher,
+                    input.stage
+                )
+            };
+            return Err(self.invalid(&format!("stages.{}.enabled", input.publisher), message));
+        }
+        if self.stage_enabled("actuator") {
+            let device = self.actuator.device.trim();
+            if device == "sim" && !self.stage_enabled("sim") {
+                return Err(self.invalid(
+                    "actuator.device",
+                    "= \"sim\" opens the simulator's serial port, but [stages.sim] enabled = \
+                     false; name the real device (e.g. \"/dev/ttyUSB0\") or enable the sim stage",
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Checks the `[capture]` section (files and folders it names must exist for the source
     /// in use; camera devices may appear later and are checked by the capture stage).
     fn validate_capture(&self) -> Result<(), ConfigError> {
@@ -1295,6 +1440,9 @@ impl HvsConfig {
             CaptureSource::Sim => {}
             CaptureSource::V4l2 => {
                 let v = &c.v4l2;
+                if let Err((key, message)) = v.controls.validate() {
+                    return Err(self.invalid(key, message));
+                }
                 for (key, device) in [
                     ("capture.v4l2.left_device", &v.left_device),
                     ("capture.v4l2.right_device", &v.right_device),
@@ -1503,8 +1651,10 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<HvsConfig, ConfigError> {
-        // Disable the sim so the map file need not exist for schema tests.
-        let text = format!("{text}\n[stages.sim]\nenabled = false\n");
+        // The sim's map from the repository, so that a file in a folder that does not exist
+        // is still a whole, runnable config.
+        let map = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/maps/maze.txt");
+        let text = format!("{text}\n[sim]\nmap = \"{map}\"\n");
         HvsConfig::parse(&text, Path::new("/nonexistent/test.toml"))
     }
 
@@ -1584,7 +1734,8 @@ mod tests {
         let c = parse(
             "[capture]\nsource = \"v4l2\"\nwidth = 320\nheight = 240\n\
              [capture.v4l2]\nleft_device = \"/dev/video4\"\nright_device = \"/dev/video6\"\n\
-             pixel_format = \"mjpeg\"\nmax_skew_ms = 10\n",
+             pixel_format = \"mjpeg\"\nmax_skew_ms = 10\n\
+             [actuator]\ndevice = \"/dev/ttyUSB0\"\n[stages.stereo-hi]\nenabled = false\n",
         )
         .unwrap();
         assert_eq!(c.capture.source, CaptureSource::V4l2);
@@ -1653,6 +1804,41 @@ mod tests {
             .unwrap();
         assert_eq!(fusion.restart, RestartPolicy::OnFailure);
         assert_eq!(fusion.max_restarts, 2);
-        assert!(!c.stage_enabled("sim"));
+        assert!(c.stage_enabled("sim"));
+    }
+
+    #[test]
+    fn a_config_whose_stages_wait_on_nobody_is_refused_naming_the_keys() {
+        let err = |text: &str| match parse(text) {
+            Ok(_) => panic!("accepted:\n{text}"),
+            Err(ConfigError::Invalid { key, message, .. }) => (key, message),
+            Err(e) => panic!("{e}"),
+        };
+        let (key, message) = err("[stages.sim]\nenabled = false\n");
+        assert_eq!(key, "stages.sim.enabled");
+        assert!(message.contains("no stage produces a frame"), "{message}");
+        let (key, message) = err("[stages.capture]\nenabled = false\n");
+        assert_eq!(key, "stages.capture.enabled");
+        assert!(
+            message.starts_with("stereo-lo reads frames/320x240"),
+            "{message}"
+        );
+        let (key, _) = err("[stages.fusion]\nenabled = false\n");
+        assert_eq!(key, "stages.fusion.enabled");
+        let (key, message) = err(
+            "[capture]\nsource = \"v4l2\"\n[actuator]\ndevice = \"/dev/ttyUSB0\"\n\
+             [capture.v4l2]\nleft_device = \"/dev/video4\"\n[capture.v4l2.controls]\n\
+             exposure_100us = 0\n",
+        );
+        assert_eq!(key, "capture.v4l2.controls.exposure_100us", "{message}");
+        let (key, message) = err("[capture]\nsource = \"v4l2\"\n");
+        assert_eq!(key, "actuator.device");
+        assert!(
+            message.contains("[stages.sim] enabled = false"),
+            "{message}"
+        );
+        // Off together: a pipeline without wheels or decisions is fine.
+        parse("[stages.decision]\nenabled = false\n[stages.actuator]\nenabled = false\n")
+            .expect("no decisions, no actuator");
     }
 }

@@ -146,6 +146,56 @@ pub const SUPERVISOR_STATUS: Topic<SupervisorStatus> = Topic::new("supervisor/st
 pub const SUPERVISOR_CONTROL: Topic<ControlRequest> =
     Topic::new("supervisor/control").with_publishers(4);
 
+/// One input of a stage: the topic it waits on and the stage that publishes it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StageInput {
+    /// The reading stage.
+    pub stage: &'static str,
+    /// The topic path it reads.
+    pub topic: &'static str,
+    /// The stage that publishes it.
+    pub publisher: &'static str,
+}
+
+/// The inputs each stage cannot work without (the table above, read as a graph): the
+/// pre-start check ([`HvsConfig::validate`](crate::config::HvsConfig::validate)) refuses a
+/// config in which an enabled stage waits on a topic that no enabled stage publishes.
+/// Capture reads `sim/camera/640x480` only with `capture.source = "sim"`, and publishes
+/// `frames/640x480` only at a 640x480 capture size; fusion also takes the 640x480 results
+/// when they come, but drives without them.
+pub const STAGE_INPUTS: [StageInput; 6] = [
+    StageInput {
+        stage: "capture",
+        topic: SIM_CAMERA.path,
+        publisher: "sim",
+    },
+    StageInput {
+        stage: "stereo-lo",
+        topic: FRAMES_LO.path,
+        publisher: "capture",
+    },
+    StageInput {
+        stage: "stereo-hi",
+        topic: FRAMES_HI.path,
+        publisher: "capture",
+    },
+    StageInput {
+        stage: "fusion",
+        topic: DISPARITY_LO.path,
+        publisher: "stereo-lo",
+    },
+    StageInput {
+        stage: "decision",
+        topic: RANGES.path,
+        publisher: "fusion",
+    },
+    StageInput {
+        stage: "actuator",
+        topic: DECISIONS.path,
+        publisher: "decision",
+    },
+];
+
 /// Every fixed topic path with its iceoryx2 payload type name, for discovery by probes.
 pub const ALL_TOPIC_PATHS: [(&str, &str); 12] = [
     (SIM_CAMERA.path, "hvs::StereoFrame640x480"),

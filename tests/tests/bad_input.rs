@@ -499,6 +499,26 @@ fn every_bad_input_has_a_clear_message() {
             "instance name with a slash",
             &with_line(&base, "instance = \"default\"", "instance = \"a/b\""),
         ),
+        config_row(
+            "no frame source (the sim stage off, capture from the sim)",
+            &with_line(
+                &base,
+                "[stages.sim]\nrestart = \"always\"",
+                "[stages.sim]\nrestart = \"always\"\nenabled = false",
+            ),
+        ),
+        config_row(
+            "stereo-hi on with a 320x240 capture",
+            &with_line(
+                &base,
+                "source = \"sim\"",
+                "source = \"files\"\nwidth = 320\nheight = 240\nfiles.folder = \"/\"",
+            ),
+        ),
+        config_row(
+            "the actuator without a device",
+            &with_line(&base, "device = \"sim\"", "device = \"\""),
+        ),
     ];
     let dir = tempfile::tempdir().expect("tempdir");
     rows.extend(file_rows(dir.path()));

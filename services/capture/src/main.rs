@@ -142,8 +142,12 @@ struct PairPublisher {
 }
 
 impl PairPublisher {
-    fn open(rt: &mut StageRuntime, source: FrameSource) -> Result<Self, StageError> {
-        let (width, height) = (rt.config.capture.width, rt.config.capture.height);
+    /// Opens the publishers for pairs of `width x height` (at 320x240 only the fast path's).
+    fn open(
+        rt: &mut StageRuntime,
+        source: FrameSource,
+        (width, height): (u32, u32),
+    ) -> Result<Self, StageError> {
         let hi = if width as usize == HI_WIDTH {
             Some(rt.node.publisher(&topics::FRAMES_HI)?)
         } else {
@@ -335,8 +339,10 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         },
         max_skew_ns: (v.max_skew_ms * 1e6) as u64,
         stall_timeout: Duration::from_millis(v.stall_timeout_ms),
+        controls: v.controls.clone(),
     };
-    let mut out = PairPublisher::open(rt, FrameSource::V4l2)?;
+    // Opened for the negotiated size (re-opened if a reconnect negotiates another).
+    let mut out: Option<((u32, u32), PairPublisher)> = None;
     let first_backoff = Duration::from_millis(v.reconnect_backoff_ms);
     let max_backoff = Duration::from_millis(v.reconnect_max_backoff_ms);
     let mut backoff = first_backoff;
@@ -356,8 +362,7 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                 rt.set_health(StageHealth::Degraded);
                 rt.set_note(format!("v4l2 {devices}: reconnecting"));
                 tracing::warn!(
-                    "{}: {e}; retrying in {:.1} s (attempt {attempt})",
-                    rt.stage,
+                    "{e}; retrying in {:.1} s (attempt {attempt})",
                     backoff.as_secs_f64()
                 );
                 if !wait_beating(rt, backoff) {
@@ -367,29 +372,12 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                 continue;
             }
         };
-        let (left, right) = cam.cameras();
-        for camera in [left, right] {
-            match camera.fps() {
-                Some(fps) if (fps - spec.mode.fps).abs() > 0.01 * spec.mode.fps => {
-                    tracing::warn!(
-                        "{}: camera {} runs at {fps:.2} fps, not the requested {} (camera.fps)",
-                        rt.stage,
-                        camera.device().display(),
-                        spec.mode.fps
-                    );
-                }
-                Some(_) => {}
-                None => tracing::warn!(
-                    "{}: camera {} has no frame-rate control; it runs at its default rate",
-                    rt.stage,
-                    camera.device().display()
-                ),
-            }
-        }
+        let negotiated = cam.negotiated().clone();
+        let mode = &negotiated.mode;
+        // The one line that says what was chosen and why.
         tracing::info!(
-            "{}: source v4l2 {devices}, {}, pairs within {} ms{}",
-            rt.stage,
-            spec.mode,
+            "source v4l2 {devices}: {}; pairs within {} ms{}",
+            negotiated.summary(),
             v.max_skew_ms,
             if attempt > 0 {
                 format!(" (reconnected after {attempt} attempts)")
@@ -397,10 +385,53 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                 String::new()
             }
         );
+        if (mode.width, mode.height) != (c.width, c.height) {
+            tracing::warn!(
+                "both cameras stream only at {}x{} on this USB bus: both paths are fed from it \
+                 and stereo-hi stays idle",
+                mode.width,
+                mode.height
+            );
+        }
+        let (left, right) = cam.cameras();
+        for (camera, report) in [
+            (left, &negotiated.controls.0),
+            (right, &negotiated.controls.1),
+        ] {
+            let device = camera.device().display();
+            if !report.applied.is_empty() {
+                tracing::info!(%device, applied = ?report.applied, "image controls locked");
+            }
+            for (key, why) in &report.problems {
+                tracing::warn!(%device, "capture.v4l2.controls.{key}: {why}");
+            }
+            match camera.fps() {
+                Some(fps) if (fps - mode.fps).abs() > 0.01 * mode.fps => tracing::warn!(
+                    %device,
+                    "camera runs at {fps:.2} fps, not the negotiated {}",
+                    mode.fps
+                ),
+                Some(_) => {}
+                None => tracing::warn!(
+                    %device,
+                    "camera has no frame-rate control; it runs at its default rate"
+                ),
+            }
+        }
+        let size = (mode.width, mode.height);
+        if out.as_ref().is_none_or(|(s, _)| *s != size) {
+            out = Some((size, PairPublisher::open(rt, FrameSource::V4l2, size)?));
+        }
+        let Some((_, out)) = out.as_mut() else {
+            return Err("capture: no publisher for the negotiated size".into());
+        };
         backoff = first_backoff;
         attempt = 0;
         rt.set_health(StageHealth::Running);
-        rt.set_note(format!("v4l2 {devices}"));
+        rt.set_note(format!(
+            "v4l2 {devices} {}x{}@{}",
+            mode.width, mode.height, mode.fps
+        ));
         rt.beat();
         let dropped_before = rt_drops(&cam);
         let mut dropped_total = 0u64;
@@ -461,7 +492,8 @@ fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     let c = rt.config.capture.clone();
     let folder = rt.config.resolve_path(&c.files.folder);
     let mut source = FileSource::open(&folder, c.width, c.height, c.files.loop_playback)?;
-    let mut out = PairPublisher::open(rt, FrameSource::Files)?;
+    let size = (rt.config.capture.width, rt.config.capture.height);
+    let mut out = PairPublisher::open(rt, FrameSource::Files, size)?;
     let count = source.pairs().len();
     tracing::info!(
         "{}: source files {} ({count} pairs, {}x{}, {}{})",
