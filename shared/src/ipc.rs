@@ -455,6 +455,20 @@ pub fn iceoryx_files() -> Vec<String> {
     files
 }
 
+/// Counts the iceoryx2 nodes of dead processes whose resources are still there (a run that
+/// was killed); `Err` carries iceoryx2's reason when the nodes cannot be listed.
+pub fn dead_nodes() -> Result<usize, String> {
+    let mut dead = 0;
+    Node::<IpcService>::list(iceoryx_config(), |state| {
+        if let NodeState::Dead(_) = state {
+            dead += 1;
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| format!("{e:?}"))?;
+    Ok(dead)
+}
+
 /// Removes the stale resources of every dead iceoryx2 node; returns how many were removed.
 pub fn cleanup_dead_nodes() -> usize {
     let mut removed = 0;

@@ -3,6 +3,7 @@
 mod bench;
 mod bench_stages;
 mod control;
+mod doctor;
 mod drive;
 mod probe_cli;
 mod process;
@@ -58,6 +59,16 @@ enum Command {
         /// record` records: both pairs, ranges, decisions, actuator output).
         #[arg(long, value_name = "FILE.mcap")]
         record: Option<PathBuf>,
+    },
+    /// Check what a robot needs before `hvs run`: the config, the cameras (stable names,
+    /// formats, both streaming together), the serial device and the servo controller,
+    /// /dev/shm space, leftovers of a dead run. One line per check with what to do about
+    /// it; exit 0 when nothing fails, 1 otherwise.
+    Doctor {
+        /// Pipeline configuration (default: config/sim.toml; the robot's is
+        /// config/minoru.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
     },
     /// Show the stages of a running pipeline: pid, state, restarts, rate, latency.
     Status {
@@ -439,6 +450,16 @@ fn main() -> ExitCode {
             })
             .map(|_| ())
         })(),
+        Command::Doctor { config } => match resolve_config(config) {
+            Ok(path) => {
+                return if doctor::doctor(&path) {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::FAILURE
+                };
+            }
+            Err(e) => Err(e),
+        },
         Command::Status { target, json } => {
             target.instance().and_then(|i| control::status(&i, json))
         }
