@@ -388,7 +388,7 @@ fn shm_check() -> Check {
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
     match nix::sys::statvfs::statvfs("/dev/shm") {
         Ok(s) => {
-            let free = s.blocks_available() as u64 * s.fragment_size() as u64;
+            let free = s.blocks_available() * s.fragment_size();
             let detail = format!(
                 "/dev/shm: {:.0} MiB free, a pipeline maps up to {:.0} MiB",
                 mib(free),
