@@ -3,7 +3,8 @@
 //!
 //! - [`psc`]: the byte protocol;
 //! - [`commander`]: coalescing, watchdog and pacing, as a pure state machine;
-//! - [`link`]: the serial port itself (`serialport`), with the `!SCVER?` link check.
+//! - [`link`]: the serial port itself (`serialport`) as a non-blocking state machine
+//!   (absent, probing with `!SCVER?`, up, lost).
 
 pub mod commander;
 pub mod link;
