@@ -10,7 +10,12 @@ Benchmark tooling only: OpenCV is never used by the product. Everything runs sin
             --degrade the webcam-defect version too), scored by `hvs eval --predictions`,
             i.e. by exactly the same code that scores the hvs matchers.
 
+  shifted:  with --vshift=-4,-2,2,4 the same scenes with the right image shifted by those rows
+            (clean and degraded), as `hvs eval --vshift` makes them; hvs undoes the shift with
+            its online row alignment, OpenCV matches the shifted pair as it is.
+
 Usage: python3 bench/compare_opencv.py [--hvs target/release/hvs] [--dataset ../shared/datasets]
+       [--vshift=-4,-2,2,4] [--skip-speed]
 Installs opencv-python-headless with pip if it is missing.
 """
 
@@ -109,7 +114,8 @@ def speed(args, cv2, np, workdir):
 
 def accuracy(args, cv2, np, workdir):
     inputs = workdir / "inputs"
-    subprocess.run([args.hvs, "eval", "--algo", "none", "--dataset", args.dataset, "--degrade", "--export", str(inputs)], check=True, capture_output=True)
+    vshift = [f"--vshift={args.vshift}"] if args.vshift else []
+    subprocess.run([args.hvs, "eval", "--algo", "none", "--dataset", args.dataset, "--degrade", "--export", str(inputs)] + vshift, check=True, capture_output=True)
     methods = None
     for line in (inputs / "scenes.tsv").read_text().splitlines():
         name, condition, _w, _h, min_d, max_d = line.split("\t")
@@ -125,13 +131,13 @@ def accuracy(args, cv2, np, workdir):
             cv2.imwrite(str(out_dir / f"{name}-{condition}.png"), to_kitti(np, m.compute(left, right), min_d))
     rows = []
     for method in methods:
-        res = hvs_json([args.hvs, "eval", "--algo", method, "--dataset", args.dataset, "--degrade", "--predictions", str(workdir / "pred" / method), "--json"])
+        res = hvs_json([args.hvs, "eval", "--algo", method, "--dataset", args.dataset, "--degrade", "--predictions", str(workdir / "pred" / method), "--json"] + vshift)
         rows += res["means"]
         rows_scene = res["rows"]
         for r in rows_scene:
             r["algorithm"] = method
         args.scene_rows += rows_scene
-    ours = hvs_json([args.hvs, "eval", "--algo", args.algo, "--dataset", args.dataset, "--degrade", "--json", "--repeat", "1"])
+    ours = hvs_json([args.hvs, "eval", "--algo", args.algo, "--dataset", args.dataset, "--degrade", "--json", "--repeat", "1"] + vshift)
     rows += ours["means"]
     args.scene_rows += ours["rows"]
     return rows
@@ -145,32 +151,54 @@ def main():
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--reference", default="opencv-sgbm", help="OpenCV method the ratios are taken against")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--vshift", default="", help="also score with the right image shifted by these rows, e.g. -4,-2,2,4")
+    p.add_argument("--skip-speed", action="store_true", help="accuracy only")
     args = p.parse_args()
     args.scene_rows = []
     cv2, np = ensure_opencv()
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
-        speed_rows = speed(args, cv2, np, workdir)
+        speed_rows = [] if args.skip_speed else speed(args, cv2, np, workdir)
         acc_rows = accuracy(args, cv2, np, workdir)
     if args.json:
         print(json.dumps({"speed": speed_rows, "accuracy": acc_rows, "scenes": args.scene_rows}, indent=2))
         return
     print(f"OpenCV {cv2.__version__}, single thread; hvs single thread; same images")
     print("\nspeed (simulated hallway pair), median ms per frame; ratio = reference / algorithm (>1: faster than the reference)")
-    for size in ("320x240", "640x480"):
+    for size in ("320x240", "640x480") if speed_rows else ():
         ref = next(r["median_ms"] for r in speed_rows if r["algorithm"] == args.reference and r["size"] == size)
         for r in sorted((r for r in speed_rows if r["size"] == size), key=lambda r: r["median_ms"]):
             print(f"  {size}  {r['algorithm']:<16} {r['median_ms']:8.2f} ms   {ref / r['median_ms']:6.2f}x")
-    print("\naccuracy, mean over scenes: bad-2 % (lower is better), density %")
-    print(f"  {'algorithm':<16} {'clean bad-2':>11} {'degraded bad-2':>15} {'clean dens':>11} {'degr dens':>10}")
+    conditions = []
+    for r in acc_rows:
+        if r["condition"] not in conditions:
+            conditions.append(r["condition"])
     names = []
     for r in acc_rows:
         if r["algorithm"] not in names:
             names.append(r["algorithm"])
+    print("\naccuracy, mean over scenes: bad-2 % (lower is better); density % in brackets")
+    print(f"  {'algorithm':<16}" + "".join(f" {c:>16}" for c in conditions))
     for n in names:
-        c = next(r for r in acc_rows if r["algorithm"] == n and r["condition"] == "clean")
-        d = next(r for r in acc_rows if r["algorithm"] == n and r["condition"] == "degraded")
-        print(f"  {n:<16} {c['bad2_pct']:11.2f} {d['bad2_pct']:15.2f} {c['density_pct']:11.1f} {d['density_pct']:10.1f}")
+        cells = []
+        for c in conditions:
+            r = next((r for r in acc_rows if r["algorithm"] == n and r["condition"] == c), None)
+            cells.append(f"{r['bad2_pct']:7.2f} ({r['density_pct']:5.1f})" if r else f"{'-':>15}")
+        print(f"  {n:<16}" + "".join(f" {x:>16}" for x in cells))
+    if args.vshift:
+        print("\nper scene, bad-2 %")
+        scenes = []
+        for r in args.scene_rows:
+            if r["scene"] not in scenes:
+                scenes.append(r["scene"])
+        for sc in scenes:
+            print(f"  {sc}")
+            for n in names:
+                cells = []
+                for c in conditions:
+                    r = next((r for r in args.scene_rows if r["algorithm"] == n and r["condition"] == c and r["scene"] == sc), None)
+                    cells.append(f"{r['bad2_pct']:7.2f}" if r else "-")
+                print(f"    {n:<14}" + "".join(f" {x:>16}" for x in cells))
 
 
 if __name__ == "__main__":

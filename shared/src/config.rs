@@ -449,6 +449,60 @@ pub struct StereoConfig {
     pub sgm: SgmConfig,
     /// Ogale & Aloimonos settings.
     pub ogale: OgaleConfig,
+    /// Online row alignment (the vertical offset between the cameras).
+    pub row_align: RowAlignConfig,
+}
+
+/// Online row alignment before matching (services/stereo/src/rowalign.rs): the vertical
+/// offset between the left and the right image is measured from the images, tracked over
+/// frames and removed. With a calibration it measures the residual after rectification.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RowAlignConfig {
+    /// Measure and correct the offset.
+    pub enabled: bool,
+    /// Largest offset searched, rows either way.
+    pub max_shift_px: u32,
+    /// Measure every this many frames (the tracked offset is applied to every frame).
+    pub every_n_frames: u32,
+    /// Warn when the tracked offset exceeds this, rows (the camera was knocked).
+    pub warn_px: f32,
+}
+
+impl Default for RowAlignConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            max_shift_px: 6,
+            every_n_frames: 4,
+            warn_px: 2.0,
+        }
+    }
+}
+
+impl RowAlignConfig {
+    /// Checks the ranges; `Err` carries the key (below the stereo section) and the message.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if !(1..=16).contains(&self.max_shift_px) {
+            return Err((
+                "row_align.max_shift_px",
+                format!("= {} must be in 1..=16 rows", self.max_shift_px),
+            ));
+        }
+        if !(1..=1000).contains(&self.every_n_frames) {
+            return Err((
+                "row_align.every_n_frames",
+                format!("= {} must be in 1..=1000", self.every_n_frames),
+            ));
+        }
+        if !(self.warn_px > 0.0 && self.warn_px <= 16.0) {
+            return Err((
+                "row_align.warn_px",
+                format!("= {} must be in (0, 16] rows", self.warn_px),
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for StereoConfig {
@@ -468,6 +522,7 @@ impl Default for StereoConfig {
             bm: BlockMatchConfig::default(),
             sgm: SgmConfig::default(),
             ogale: OgaleConfig::default(),
+            row_align: RowAlignConfig::default(),
         }
     }
 }
@@ -1053,6 +1108,9 @@ impl HvsConfig {
             ("stereo.lo", &self.stereo.lo, 320),
             ("stereo.hi", &self.stereo.hi, 640),
         ] {
+            if let Err((sub, message)) = cfg.row_align.validate() {
+                return Err(self.invalid(&format!("{key}.{sub}"), message));
+            }
             if cfg.max_disp <= cfg.min_disp {
                 return Err(self.invalid(
                     &format!("{key}.max_disp"),

@@ -37,7 +37,7 @@ pub const NAME_LEN: usize = 32;
 /// Maximum number of stages a [`SupervisorStatus`] lists.
 pub const MAX_STAGES: usize = 12;
 /// Length of a stage's free-text status note (heartbeat and status entry), bytes.
-pub const NOTE_LEN: usize = 96;
+pub const NOTE_LEN: usize = 128;
 
 /// Encodes `name` into a NUL-padded fixed array, truncating at a UTF-8 boundary if too long.
 pub fn encode_name<const N: usize>(name: &str) -> [u8; N] {
@@ -271,6 +271,48 @@ pub struct DisparityHeader {
     pub algorithm: u32,
     /// Number of pixels with a valid disparity.
     pub valid_px: u32,
+    /// The tracked vertical offset between the cameras, 1/1000 px (the right image's content
+    /// lies this far below the left's; 0 without an estimate).
+    pub row_shift_mpx: i32,
+    /// [`RowAlignState`] code.
+    pub row_align: u32,
+}
+
+/// What the row alignment of a disparity map did (the `row_align` of a [`DisparityHeader`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RowAlignState {
+    /// Off (`row_align.enabled = false`), or not a stereo stage's map.
+    Off = 0,
+    /// On, no estimate yet (an untextured view so far).
+    Searching = 1,
+    /// Tracked, below the smallest offset worth applying: the right image was used as is.
+    Aligned = 2,
+    /// Tracked and applied to the right image before matching.
+    Corrected = 3,
+}
+
+impl RowAlignState {
+    /// Decodes a code.
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            0 => Some(Self::Off),
+            1 => Some(Self::Searching),
+            2 => Some(Self::Aligned),
+            3 => Some(Self::Corrected),
+            _ => None,
+        }
+    }
+
+    /// Lower-case label.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Searching => "searching",
+            Self::Aligned => "aligned",
+            Self::Corrected => "corrected",
+        }
+    }
 }
 
 macro_rules! disparity_map {
@@ -869,7 +911,7 @@ pub struct StageStatusEntry {
 }
 
 /// The supervisor's view of the whole pipeline, published once a second with history 1 so
-/// `hvs status` and probes get it at once (2 456 bytes).
+/// `hvs status` and probes get it at once (2 840 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
 #[type_name("hvs::SupervisorStatus")]
@@ -954,18 +996,18 @@ mod tests {
         assert_eq!(size_of::<FrameHeader>(), 72);
         assert_eq!(size_of::<StereoFrame320x240>(), 72 + 2 * 76_800);
         assert_eq!(size_of::<StereoFrame640x480>(), 72 + 2 * 307_200);
-        assert_eq!(size_of::<DisparityHeader>(), 64);
-        assert_eq!(size_of::<DisparityMap320x240>(), 64 + 2 * 76_800);
-        assert_eq!(size_of::<DisparityMap640x480>(), 64 + 2 * 307_200);
+        assert_eq!(size_of::<DisparityHeader>(), 72);
+        assert_eq!(size_of::<DisparityMap320x240>(), 72 + 2 * 76_800);
+        assert_eq!(size_of::<DisparityMap640x480>(), 72 + 2 * 307_200);
         assert_eq!(size_of::<RangeWindow>(), 24);
         assert_eq!(size_of::<RangeReport>(), 440);
         assert_eq!(size_of::<ObstacleScan>(), 264);
         assert_eq!(size_of::<Decision>(), 64);
         assert_eq!(size_of::<ActuatorReport>(), 72);
-        assert_eq!(size_of::<StageHeartbeat>(), 216);
+        assert_eq!(size_of::<StageHeartbeat>(), 248);
         assert_eq!(size_of::<SimTruth>(), 88);
-        assert_eq!(size_of::<StageStatusEntry>(), 200);
-        assert_eq!(size_of::<SupervisorStatus>(), 56 + 12 * 200);
+        assert_eq!(size_of::<StageStatusEntry>(), 232);
+        assert_eq!(size_of::<SupervisorStatus>(), 56 + 12 * 232);
         assert_eq!(size_of::<ControlRequest>(), 48);
     }
 

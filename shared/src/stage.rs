@@ -233,7 +233,7 @@ impl StageRuntime {
         self.health = health;
     }
 
-    /// Sets the free-text note reported in heartbeats (truncated to 96 bytes).
+    /// Sets the free-text note reported in heartbeats (truncated to 128 bytes).
     pub fn set_note(&mut self, note: impl Into<String>) {
         self.note = note.into();
     }

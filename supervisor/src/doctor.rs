@@ -135,8 +135,21 @@ pub fn run_checks(path: &Path, opener: &dyn DeviceOpener) -> Vec<Check> {
         }
     };
     if let Some(c) = &config {
-        checks.extend(camera_checks(c, opener));
-        checks.extend(serial_checks(c));
+        if let Some(pid) = running_supervisor(c) {
+            checks.push(Check::bad(
+                Verdict::Warn,
+                "devices",
+                format!(
+                    "cameras and serial device not checked: instance {:?} is running \
+                     (supervisor pid {pid}) and holds them",
+                    c.instance
+                ),
+                "`hvs status` shows what they do; `hvs stop` first to check them here",
+            ));
+        } else {
+            checks.extend(camera_checks(c, opener));
+            checks.extend(serial_checks(c));
+        }
     } else {
         checks.push(Check::bad(
             Verdict::Warn,
@@ -214,7 +227,37 @@ fn camera_checks(c: &HvsConfig, opener: &dyn DeviceOpener) -> Vec<Check> {
         let by_path = device.starts_with("/dev/v4l/");
         match opener.open(device) {
             Ok(mut dev) => {
-                let caps = dev.query_caps().ok();
+                let caps = match dev.query_caps() {
+                    Ok(c) if c.is_streaming_capture() => Some(c),
+                    Ok(c) => {
+                        all_there = false;
+                        checks.push(Check::bad(
+                            Verdict::Fail,
+                            side,
+                            format!(
+                                "{} ({}) is not a streaming video capture node",
+                                device.display(),
+                                c.card
+                            ),
+                            "UVC cameras also create a metadata node: use the camera's other \
+                             /dev/videoN (or its /dev/v4l/by-path name ending in -index0)",
+                        ));
+                        continue;
+                    }
+                    Err(errno) => {
+                        all_there = false;
+                        checks.push(Check::bad(
+                            Verdict::Fail,
+                            side,
+                            format!(
+                                "{} is not a V4L2 device (VIDIOC_QUERYCAP: {errno})",
+                                device.display()
+                            ),
+                            format!("set {key} to a camera"),
+                        ));
+                        continue;
+                    }
+                };
                 let offer = hvs_capture::v4l2::camera::enumerate(dev.as_mut(), device);
                 let detail = format!(
                     "{} ({}, {}): {}",
@@ -431,27 +474,34 @@ fn leftover_checks(config: Option<&HvsConfig>) -> Vec<Check> {
             "check /tmp/iceoryx2 permissions",
         ),
     }];
-    if let Some(c) = config {
-        let lock = hvs_shared::config::run_dir(&c.instance).join("supervisor.lock");
-        if let Ok(pid) = std::fs::read_to_string(&lock) {
-            let pid = pid.trim();
-            let alive = pid
-                .parse::<i32>()
-                .is_ok_and(|p| nix::sys::signal::kill(nix::unistd::Pid::from_raw(p), None).is_ok());
-            if alive {
-                checks.push(Check::bad(
-                    Verdict::Warn,
-                    "instance",
-                    format!("{:?} is running (supervisor pid {pid})", c.instance),
-                    format!(
-                        "`hvs stop --instance {}` first, or use another --instance",
-                        c.instance
-                    ),
-                ));
-            }
-        }
+    if let Some(c) = config
+        && let Some(pid) = running_supervisor(c)
+    {
+        checks.push(Check::bad(
+            Verdict::Warn,
+            "instance",
+            format!("{:?} is running (supervisor pid {pid})", c.instance),
+            format!(
+                "`hvs stop --instance {}` before another `hvs run` of it, or use another \
+                 --instance",
+                c.instance
+            ),
+        ));
     }
     checks
+}
+
+/// The pid of a live supervisor of the config's instance (from its lock file).
+fn running_supervisor(c: &HvsConfig) -> Option<i32> {
+    let lock = hvs_shared::config::run_dir(&c.instance).join("supervisor.lock");
+    let pid = std::fs::read_to_string(lock)
+        .ok()?
+        .trim()
+        .parse::<i32>()
+        .ok()?;
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), None)
+        .is_ok()
+        .then_some(pid)
 }
 
 #[cfg(test)]

@@ -141,6 +141,12 @@ enum Command {
         /// Save our disparity maps here.
         #[arg(long, value_name = "DIR")]
         save: Option<PathBuf>,
+        /// Also score with the right image shifted down by N rows (negative: up), for each N
+        /// of a comma-separated list (e.g. `--vshift=-4,-2,2,4`); with --degrade the shift
+        /// replaces the defects' own 1 px. The row alignment (stereo.*.row_align) is what
+        /// should undo it.
+        #[arg(long, value_name = "N[,N...]", value_delimiter = ',', allow_negative_numbers = true)]
+        vshift: Vec<i32>,
         #[command(flatten)]
         base: stereo_cli::StereoBase,
     },
@@ -496,6 +502,7 @@ fn main() -> ExitCode {
             export,
             predictions,
             save,
+            vshift,
             base,
         } => stereo_cli::eval(
             &stereo_cli::EvalOptions {
@@ -507,6 +514,7 @@ fn main() -> ExitCode {
                 export,
                 predictions,
                 save,
+                vshift,
             },
             &base,
         ),

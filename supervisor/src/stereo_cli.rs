@@ -134,13 +134,15 @@ pub struct EvalOptions {
     pub predictions: Option<PathBuf>,
     /// Write our disparity maps here.
     pub save: Option<PathBuf>,
+    /// Also score with the right image shifted down by each of these rows (negative: up).
+    pub vshift: Vec<i32>,
 }
 
 /// One row of `hvs eval`.
 #[derive(Debug, Serialize)]
 struct Row {
     algorithm: String,
-    condition: &'static str,
+    condition: String,
     #[serde(flatten)]
     result: SceneResult,
 }
@@ -149,17 +151,30 @@ struct Row {
 #[derive(Debug, Serialize)]
 struct MeanRow {
     algorithm: String,
-    condition: &'static str,
+    condition: String,
     bad1_pct: f64,
     bad2_pct: f64,
     density_pct: f64,
     ms_per_frame: f64,
 }
 
-fn conditions(degrade: bool) -> Vec<(&'static str, Option<Degradation>)> {
-    let mut c = vec![("clean", None)];
+/// The conditions scored: clean, degraded (`--degrade`), and each of them with the right
+/// image shifted by every `--vshift` (which replaces the degradation's own 1 px shift).
+fn conditions(degrade: bool, vshifts: &[i32]) -> Vec<(String, Option<Degradation>, i32)> {
+    let mut bases = vec![("clean", None)];
     if degrade {
-        c.push(("degraded", Some(Degradation::default())));
+        bases.push(("degraded", Some(Degradation::default())));
+    }
+    let mut c = Vec::new();
+    for (name, d) in bases {
+        c.push((name.to_string(), d, 0));
+        for &v in vshifts.iter().filter(|&&v| v != 0) {
+            let d = d.map(|d| Degradation {
+                vertical_shift_px: 0,
+                ..d
+            });
+            c.push((format!("{name}-v{v:+}"), d, v));
+        }
     }
     c
 }
@@ -175,13 +190,17 @@ pub fn eval(opts: &EvalOptions, base: &StereoBase) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     // Progress on a terminal only; redirected output stays clean.
     let progress = !opts.json && std::io::IsTerminal::is_terminal(&std::io::stderr());
-    for (condition, degradation) in conditions(opts.degrade) {
+    for (condition, degradation, vshift) in conditions(opts.degrade, &opts.vshift) {
+        let condition = condition.as_str();
         let prepared: Vec<Scene> = scenes
             .iter()
             .map(|s| {
                 let mut s = s.clone();
                 if let Some(d) = &degradation {
                     s.degrade(d);
+                }
+                if vshift != 0 {
+                    s.shift_right(vshift);
                 }
                 s
             })
@@ -204,12 +223,13 @@ pub fn eval(opts: &EvalOptions, base: &StereoBase) -> anyhow::Result<()> {
                 }
                 rows.push(Row {
                     algorithm: opts.algo.clone(),
-                    condition,
+                    condition: condition.to_string(),
                     result: SceneResult {
                         scene: s.name.clone(),
                         region: s.region,
                         score: eval::score(&s.gt_q8, &s.scored, &est),
                         ms_per_frame: f64::NAN,
+                        row_shift_px: None,
                         estimate_q8: Vec::new(),
                     },
                 });
@@ -239,7 +259,7 @@ pub fn eval(opts: &EvalOptions, base: &StereoBase) -> anyhow::Result<()> {
                 }
                 rows.push(Row {
                     algorithm: algo.name().to_string(),
-                    condition,
+                    condition: condition.to_string(),
                     result: r,
                 });
             }
@@ -269,13 +289,21 @@ pub fn eval(opts: &EvalOptions, base: &StereoBase) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:<12} {:<9} {:<11} {:<7} {:>8} {:>8} {:>10} {:>9}",
-        "algorithm", "condition", "scene", "region", "bad-1 %", "bad-2 %", "density %", "ms/frame"
+        "{:<12} {:<14} {:<11} {:<7} {:>8} {:>8} {:>10} {:>9} {:>8}",
+        "algorithm",
+        "condition",
+        "scene",
+        "region",
+        "bad-1 %",
+        "bad-2 %",
+        "density %",
+        "ms/frame",
+        "rows px"
     );
     for r in &rows {
         let s: &Score = &r.result.score;
         println!(
-            "{:<12} {:<9} {:<11} {:<7} {:>8.2} {:>8.2} {:>10.1} {:>9.2}",
+            "{:<12} {:<14} {:<11} {:<7} {:>8.2} {:>8.2} {:>10.1} {:>9.2} {:>8}",
             r.algorithm,
             r.condition,
             r.result.scene,
@@ -283,12 +311,15 @@ pub fn eval(opts: &EvalOptions, base: &StereoBase) -> anyhow::Result<()> {
             s.bad1_pct,
             s.bad2_pct,
             s.density_pct,
-            r.result.ms_per_frame
+            r.result.ms_per_frame,
+            r.result
+                .row_shift_px
+                .map_or("-".to_string(), |v| format!("{v:+.2}"))
         );
     }
     for m in &means {
         println!(
-            "{:<12} {:<9} {:<11} {:<7} {:>8.2} {:>8.2} {:>10.1} {:>9.2}",
+            "{:<12} {:<14} {:<11} {:<7} {:>8.2} {:>8.2} {:>10.1} {:>9.2}",
             m.algorithm,
             m.condition,
             "MEAN",
@@ -319,7 +350,7 @@ fn means(rows: &[Row]) -> Vec<MeanRow> {
         let avg = |f: &dyn Fn(&Row) -> f64| group.iter().map(|x| f(x)).sum::<f64>() / n;
         out.push(MeanRow {
             algorithm: r.algorithm.clone(),
-            condition: r.condition,
+            condition: r.condition.clone(),
             bad1_pct: avg(&|x| x.result.score.bad1_pct),
             bad2_pct: avg(&|x| x.result.score.bad2_pct),
             density_pct: avg(&|x| x.result.score.density_pct),

@@ -30,6 +30,14 @@ fn the_simulated_robot_is_ready() {
 
 #[test]
 fn the_real_robot_without_its_devices_names_each_one_and_fails() {
+    let present: Vec<&str> = ["/dev/video0", "/dev/video2", "/dev/ttyUSB0"]
+        .into_iter()
+        .filter(|d| std::path::Path::new(d).exists())
+        .collect();
+    if !present.is_empty() {
+        eprintln!("SKIPPED: this machine has {present:?}; the test needs them absent");
+        return;
+    }
     let (code, text) = doctor(&repo_root().join("config/minoru.toml"));
     assert_eq!(code, 1, "{text}");
     for missing in [

@@ -112,22 +112,26 @@ pub enum VersionReply {
 /// bytes of the form `1.4`.
 pub fn classify_reply(rx: &[u8]) -> VersionReply {
     let rest = strip_echoes(rx);
+    // A controller powering up may put glitch bytes (line held low or high) first; nothing
+    // else may stand before or after the version: a digit-dot-digit inside other text (a
+    // GPS sentence, "3.3V") is not a PSC.
+    let start = rest.iter().take_while(|&&b| b == 0x00 || b == 0xff).count();
+    let body = &rest[start..];
     let is_version = |w: &[u8]| w[0].is_ascii_digit() && w[1] == b'.' && w[2].is_ascii_digit();
-    // A version anywhere counts: a controller powering up may put a glitch byte first.
-    if let Some(w) = rest.windows(3).find(|w| is_version(w)) {
-        return VersionReply::Version(String::from_utf8_lossy(w).into_owned());
-    }
-    let valid_start = match rest.as_slice() {
+    let valid_start = match body {
         [] => true,
         [a] => a.is_ascii_digit(),
         [a, b] => a.is_ascii_digit() && *b == b'.',
         _ => false,
     };
     if valid_start {
-        VersionReply::Incomplete
-    } else {
-        VersionReply::Garbage
+        return VersionReply::Incomplete;
     }
+    // Whole versions only (repeated queries may each have been answered).
+    if body.len().is_multiple_of(3) && body.chunks_exact(3).all(is_version) {
+        return VersionReply::Version(String::from_utf8_lossy(&body[..3]).into_owned());
+    }
+    VersionReply::Garbage
 }
 
 /// `rx` without every whole echo of the query, and without a trailing partial echo.
@@ -323,20 +327,12 @@ impl PscLink {
             LinkState::Absent | LinkState::Lost => self.try_open(now),
             LinkState::Probing => self.probe(now),
             LinkState::Up => {
-                if now >= self.next_node_check {
-                    self.next_node_check = now + NODE_CHECK;
-                    if !self.settings.device.exists() {
-                        return Some(self.lose(
-                            now,
-                            LinkError::Missing {
-                                device: self.settings.device.clone(),
-                            },
-                        ));
-                    }
+                if let Some(lost) = self.check_node(now) {
+                    return Some(lost);
                 }
                 // An echoing line returns every command: keep the input buffer empty.
                 if let Err(e) = self.read_available() {
-                    return Some(self.lose(now, e));
+                    return self.lose(now, e);
                 }
                 self.rx.clear();
                 None
@@ -351,7 +347,7 @@ impl PscLink {
         match open_port(&self.settings) {
             Ok(port) => {
                 self.port = Some(port);
-                self.reopen_delay = REOPEN_MIN;
+                self.next_node_check = now + NODE_CHECK;
                 if !self.settings.check {
                     return Some(self.come_up(now, String::new()));
                 }
@@ -373,14 +369,17 @@ impl PscLink {
     fn send_query(&mut self, now: Instant) -> Option<LinkEvent> {
         self.query_sent = Some(now);
         if let Err(e) = self.write(VERSION_QUERY) {
-            return Some(self.lose(now, e));
+            return self.lose(now, e);
         }
         None
     }
 
     fn probe(&mut self, now: Instant) -> Option<LinkEvent> {
+        if let Some(lost) = self.check_node(now) {
+            return Some(lost);
+        }
         if let Err(e) = self.read_available() {
-            return Some(self.lose(now, e));
+            return self.lose(now, e);
         }
         let waited = now.saturating_duration_since(self.query_sent.unwrap_or(now));
         match classify_reply(&self.rx) {
@@ -411,8 +410,27 @@ impl PscLink {
         event
     }
 
+    /// Every [`NODE_CHECK`] while open: a removed device node (an adapter pulled out)
+    /// takes the link down even before a read or write fails.
+    fn check_node(&mut self, now: Instant) -> Option<LinkEvent> {
+        if now < self.next_node_check {
+            return None;
+        }
+        self.next_node_check = now + NODE_CHECK;
+        if self.settings.device.exists() {
+            return None;
+        }
+        let missing = LinkError::Missing {
+            device: self.settings.device.clone(),
+        };
+        // Always an event: the link changed state.
+        let event = self.lose(now, missing.clone());
+        Some(event.unwrap_or(LinkEvent::Waiting(missing)))
+    }
+
     fn come_up(&mut self, now: Instant, firmware: String) -> LinkEvent {
         self.state = LinkState::Up;
+        self.reopen_delay = REOPEN_MIN;
         self.firmware = firmware.clone();
         self.problem = None;
         self.rx.clear();
@@ -427,27 +445,26 @@ impl PscLink {
         changed.then_some(LinkEvent::Waiting(e))
     }
 
-    fn lose(&mut self, now: Instant, e: LinkError) -> LinkEvent {
+    /// Closes the port after a failure. From up: `Lost`, reopened soon. From probing: the
+    /// reopen delay keeps doubling and only a new reason is reported, so a device that opens
+    /// but fails every read does not flood the log.
+    fn lose(&mut self, now: Instant, e: LinkError) -> Option<LinkEvent> {
         let was_up = self.state == LinkState::Up;
         self.port = None;
         self.rx.clear();
         self.query_sent = None;
-        self.state = if was_up {
-            LinkState::Lost
-        } else {
-            LinkState::Absent
-        };
         if was_up {
+            self.state = LinkState::Lost;
             self.down_since = now;
+            self.next_open = now + REOPEN_MIN;
+            self.reopen_delay = REOPEN_MIN;
+            self.problem = Some(e.clone());
+            return Some(LinkEvent::Lost(e));
         }
-        self.next_open = now + REOPEN_MIN;
-        self.reopen_delay = REOPEN_MIN;
-        self.problem = Some(e.clone());
-        if was_up {
-            LinkEvent::Lost(e)
-        } else {
-            LinkEvent::Waiting(e)
-        }
+        self.state = LinkState::Absent;
+        self.next_open = now + self.reopen_delay;
+        self.reopen_delay = (self.reopen_delay * 2).min(REOPEN_MAX);
+        self.wait_for(e)
     }
 
     /// Appends the bytes already received to `rx` (never waits).
@@ -511,7 +528,7 @@ impl PscLink {
         match self.write(bytes) {
             Ok(()) => Ok(()),
             Err(e) => {
-                self.lose(now, e.clone());
+                let _ = self.lose(now, e.clone());
                 Err(e)
             }
         }

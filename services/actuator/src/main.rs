@@ -61,6 +61,13 @@ impl Connection {
             }
             None => {}
         }
+        // From the state on every tick: the stage skeleton marks itself running when its
+        // loop starts, whatever the link did before.
+        rt.set_health(if self.link.is_up() {
+            StageHealth::Running
+        } else {
+            StageHealth::Degraded
+        });
         // One note refresh a second: "no servo controller answers on DEV (waiting 12 s)".
         let shown = Some(now.saturating_duration_since(self.started).as_secs());
         if self.note_shown_s != shown {

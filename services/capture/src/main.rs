@@ -420,6 +420,8 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         }
         let size = (mode.width, mode.height);
         if out.as_ref().is_none_or(|(s, _)| *s != size) {
+            // The old publishers first: each topic takes one publisher.
+            drop(out.take());
             out = Some((size, PairPublisher::open(rt, FrameSource::V4l2, size)?));
         }
         let Some((_, out)) = out.as_mut() else {

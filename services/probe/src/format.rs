@@ -608,7 +608,7 @@ mod tests {
         let mut hb = StageHeartbeat::zeroed();
         hb.stage = encode_name::<NAME_LEN>("capture");
         hb.health = StageHealth::Degraded as u32;
-        hb.note = encode_name::<96>("camera /dev/video2 missing");
+        hb.note = encode_name::<128>("camera /dev/video2 missing");
         let t = hb.describe_text();
         assert!(t.starts_with("heartbeat capture #0"), "{t}");
         assert!(t.contains("degraded"), "{t}");

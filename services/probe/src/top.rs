@@ -150,7 +150,7 @@ mod tests {
         hb.pid = 101;
         hb.health = StageHealth::Degraded as u32;
         hb.latency_max_ns = 2_500_000;
-        hb.note = encode_name::<96>("sim camera");
+        hb.note = encode_name::<128>("sim camera");
         let view = TopView {
             instance: "t1".into(),
             status: Some(status()),

@@ -101,6 +101,8 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             max_disp: 0,
             algorithm: 0,
             valid_px: HI_WIDTH as u32 * HI_HEIGHT as u32,
+            row_shift_mpx: 0,
+            row_align: 0,
         };
         frame.header = FrameHeader {
             frame_id,

@@ -576,7 +576,10 @@ impl StereoMatcher for BlockMatcher {
             );
         }
         let valid_px = out_q8.iter().filter(|&&d| d != 0).count() as u32;
-        Ok(MatchStats { valid_px })
+        Ok(MatchStats {
+            valid_px,
+            row_align: None,
+        })
     }
 }
 

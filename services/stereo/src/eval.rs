@@ -323,6 +323,16 @@ impl Scene {
         );
     }
 
+    /// Shifts the right image down by `rows` (negative: up), repeating the edge rows: a right
+    /// camera mounted lower than the left (`hvs eval --vshift`).
+    pub fn shift_right(&mut self, rows: i32) {
+        let mut out = vec![0u8; self.right.len()];
+        if let Ok(view) = ImageView::new(&self.right, self.width, self.height) {
+            crate::rowalign::apply_shift(view, -(rows as f32), &mut out);
+            self.right = out;
+        }
+    }
+
     /// A stereo config for this scene: `base` with the scene's search range.
     pub fn config(&self, base: &StereoConfig) -> StereoConfig {
         StereoConfig {
@@ -399,6 +409,8 @@ pub struct SceneResult {
     pub score: Score,
     /// Median matching time, ms.
     pub ms_per_frame: f64,
+    /// The row alignment's tracked offset, px (`None`: off, or no estimate).
+    pub row_shift_px: Option<f32>,
     /// The estimate (not serialised).
     #[serde(skip)]
     pub estimate_q8: Vec<u16>,
@@ -420,10 +432,12 @@ pub fn evaluate(
     let right = ImageView::new(&scene.right, scene.width, scene.height).map_err(stereo_err)?;
     let mut out = vec![0u16; scene.width * scene.height];
     let mut times = Vec::with_capacity(repeats.max(1));
+    let mut row_shift_px = None;
     for _ in 0..repeats.max(1) {
         let t = Instant::now();
-        matcher.compute(left, right, &mut out).map_err(stereo_err)?;
+        let stats = matcher.compute(left, right, &mut out).map_err(stereo_err)?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
+        row_shift_px = stats.row_align.and_then(|r| r.shift_px);
     }
     times.sort_by(f64::total_cmp);
     Ok(SceneResult {
@@ -431,6 +445,7 @@ pub fn evaluate(
         region: scene.region,
         score: score(&scene.gt_q8, &scene.scored, &out),
         ms_per_frame: times[times.len() / 2],
+        row_shift_px,
         estimate_q8: out,
     })
 }

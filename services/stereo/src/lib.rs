@@ -9,6 +9,7 @@
 //! - [`sgm`]: census + semi-global matching;
 //! - [`ogale`]: Ogale & Aloimonos shape-and-stereo correspondence;
 //! - [`census`], [`post`], [`equalize`]: building blocks shared by them;
+//! - [`rowalign`]: online row alignment (the vertical offset between the cameras);
 //! - [`eval`]: scoring against ground truth; [`synthetic`]: pairs with known disparity.
 
 pub mod block;
@@ -17,6 +18,7 @@ pub mod equalize;
 pub mod eval;
 pub mod ogale;
 pub mod post;
+pub mod rowalign;
 pub mod sgm;
 pub mod synthetic;
 
@@ -114,10 +116,12 @@ pub enum StereoError {
 }
 
 /// Statistics of one computed map.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct MatchStats {
     /// Pixels with a valid disparity.
     pub valid_px: u32,
+    /// What the row alignment did (`None` when it is off).
+    pub row_align: Option<rowalign::AlignStatus>,
 }
 
 /// A stereo algorithm.
@@ -189,13 +193,18 @@ pub fn check_range(min_disp: u32, max_disp: u32) -> Result<(), StereoError> {
 /// Builds the matcher a stereo config section describes.
 pub fn matcher_for(config: &StereoConfig) -> Result<Box<dyn StereoMatcher>, StereoError> {
     check_range(config.min_disp, config.max_disp)?;
-    Ok(match config.algorithm {
+    let inner: Box<dyn StereoMatcher> = match config.algorithm {
         StereoAlgorithm::BmSad
         | StereoAlgorithm::BmSsd
         | StereoAlgorithm::BmNcc
         | StereoAlgorithm::BmCensus => Box::new(BlockMatcher::from_config(config)?),
         StereoAlgorithm::Sgm => Box::new(SgmMatcher::from_config(config)?),
         StereoAlgorithm::Ogale => Box::new(OgaleMatcher::from_config(config)?),
+    };
+    Ok(if config.row_align.enabled {
+        Box::new(rowalign::AlignedMatcher::new(inner, config))
+    } else {
+        inner
     })
 }
 

@@ -7,9 +7,10 @@
 use std::process::ExitCode;
 
 use hvs_shared::clock::monotonic_ns;
+use hvs_shared::config::StereoConfig;
 use hvs_shared::ipc::TopicSubscriber;
 use hvs_shared::messages::{
-    DisparityHeader, DisparityMap320x240, DisparityMap640x480, StereoPayload,
+    DisparityHeader, DisparityMap320x240, DisparityMap640x480, RowAlignState, StereoPayload,
 };
 use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics::{self, Topic};
@@ -33,6 +34,74 @@ fn main() -> ExitCode {
 }
 
 type MapParts<M> = fn(&mut M) -> (&mut DisparityHeader, &mut [u16]);
+
+/// The row alignment as the stage reports it: in every map's header, in the note, and as a
+/// warning when the offset is beyond `row_align.warn_px` (again every 10 s while it is).
+struct RowReport {
+    state: RowAlignState,
+    shift_px: Option<f32>,
+    warned_at: Option<std::time::Instant>,
+    note_shift_dpx: Option<i32>,
+}
+
+impl RowReport {
+    fn new(config: &StereoConfig) -> Self {
+        Self {
+            state: if config.row_align.enabled {
+                RowAlignState::Searching
+            } else {
+                RowAlignState::Off
+            },
+            shift_px: None,
+            warned_at: None,
+            note_shift_dpx: None,
+        }
+    }
+
+    fn update(&mut self, status: Option<hvs_stereo::rowalign::AlignStatus>) {
+        let Some(s) = status else {
+            return;
+        };
+        self.shift_px = s.shift_px;
+        self.state = match (s.shift_px, s.applied_px != 0.0) {
+            (None, _) => RowAlignState::Searching,
+            (Some(_), false) => RowAlignState::Aligned,
+            (Some(_), true) => RowAlignState::Corrected,
+        };
+    }
+
+    fn report(&mut self, rt: &mut StageRuntime, config: &StereoConfig) {
+        let Some(shift) = self.shift_px else {
+            return;
+        };
+        // The note shows the offset to 0.1 px; it changes only when that does.
+        let dpx = (shift * 10.0).round() as i32;
+        if self.note_shift_dpx != Some(dpx) {
+            self.note_shift_dpx = Some(dpx);
+            rt.set_note(format!(
+                "{} {}..{} rows {:+.1} px",
+                config.algorithm.name(),
+                config.min_disp,
+                config.max_disp,
+                shift
+            ));
+        }
+        let warn_px = config.row_align.warn_px;
+        if shift.abs() > warn_px
+            && self
+                .warned_at
+                .is_none_or(|t| t.elapsed() >= std::time::Duration::from_secs(10))
+        {
+            self.warned_at = Some(std::time::Instant::now());
+            tracing::warn!(
+                shift_px = shift,
+                "the right image is {shift:+.1} rows off the left (row_align.warn_px = \
+                 {warn_px}): the camera was knocked or its calibration no longer fits; \
+                 corrected before matching"
+            );
+        }
+    }
+}
 
 fn run_path<F, M>(
     rt: &mut StageRuntime,
@@ -73,6 +142,7 @@ where
         frames.service()
     );
 
+    let mut row = RowReport::new(&config);
     let waitset = rt.waitset()?;
     let frames_guard = waitset
         .attach_notification(frames.listener())
@@ -116,6 +186,7 @@ where
             }
         };
         let done = monotonic_ns();
+        row.update(stats.row_align);
         *out_header = DisparityHeader {
             frame_id: header.frame_id,
             capture_ns: header.capture_ns,
@@ -128,7 +199,10 @@ where
             max_disp: config.max_disp,
             algorithm: matcher.algorithm() as u32,
             valid_px: stats.valid_px,
+            row_shift_mpx: row.shift_px.map_or(0, |s| (s * 1000.0).round() as i32),
+            row_align: row.state as u32,
         };
+        row.report(rt, &config);
         drop(frame);
         rt.send_or_report(&mut maps, sample, done - received_ns);
         Ok(LoopControl::Continue)

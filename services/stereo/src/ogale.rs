@@ -1152,6 +1152,7 @@ impl OgaleMatcher {
         }
         MatchStats {
             valid_px: out_q8.iter().filter(|&&d| d != 0).count() as u32,
+            row_align: None,
         }
     }
 }

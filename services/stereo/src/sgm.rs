@@ -563,6 +563,7 @@ impl StereoMatcher for SgmMatcher {
         let valid = out_q8.iter().filter(|&&d| d != 0).count();
         Ok(MatchStats {
             valid_px: valid as u32,
+            row_align: None,
         })
     }
 }

@@ -23,6 +23,11 @@ fn a_version_is_three_ascii_bytes_and_echoes_are_skipped() {
         classify_reply(b"\x001.4"),
         VersionReply::Version("1.4".into())
     );
+    // Two queries answered.
+    assert_eq!(
+        classify_reply(b"1.41.4"),
+        VersionReply::Version("1.4".into())
+    );
 }
 
 #[test]
@@ -39,7 +44,18 @@ fn echoes_and_partial_replies_are_not_yet_a_verdict() {
 
 #[test]
 fn garbage_is_named_as_such() {
-    for bytes in [&b"abc"[..], b"\xff\xfe\xfd", b"1-4", b"?\r\n", b"14."] {
+    // A digit-dot-digit inside other text is not a version: a GPS sentence, a "3.3V".
+    for bytes in [
+        &b"abc"[..],
+        b"\xff\xfe\xfd",
+        b"1-4",
+        b"?\r\n",
+        b"14.",
+        b"abc1.4",
+        b"1.4V",
+        b"$GPGGA,123519,4807.038,N",
+        b"3.3V\r\n",
+    ] {
         assert_eq!(classify_reply(bytes), VersionReply::Garbage, "{bytes:?}");
     }
     let dev = Path::new("/dev/ttyX");
@@ -120,6 +136,28 @@ fn link(path: &Path) -> PscLink {
     )
 }
 
+/// Polls with the clock `t` advanced by `step` until `done` holds for the link (the pty
+/// moves bytes in real time: up to 5 s of it on a busy machine); returns the events.
+fn run_until(
+    link: &mut PscLink,
+    t: &mut Instant,
+    step: Duration,
+    done: impl Fn(&PscLink) -> bool,
+) -> Vec<LinkEvent> {
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut events = Vec::new();
+    while !done(link) {
+        assert!(
+            Instant::now() < deadline,
+            "condition not reached: {events:?}"
+        );
+        *t += step;
+        std::thread::sleep(Duration::from_millis(1));
+        events.extend(link.poll(*t));
+    }
+    events
+}
+
 /// Polls the link with the clock `t`, advanced by `step` each time, `n` times; returns the
 /// events.
 fn run(link: &mut PscLink, t: &mut Instant, step: Duration, n: usize) -> Vec<LinkEvent> {
@@ -167,7 +205,7 @@ fn a_silent_controller_is_a_state_and_its_first_answer_brings_the_link_up() {
         "nothing is written while probing"
     );
     pty.write(b"1.4");
-    let events = run(&mut link, &mut t, Duration::from_millis(5), 10);
+    let events = run_until(&mut link, &mut t, Duration::from_millis(1), PscLink::is_up);
     assert_eq!(
         events,
         vec![LinkEvent::Up {

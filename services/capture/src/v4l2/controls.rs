@@ -125,6 +125,12 @@ fn apply_one(dev: &mut dyn V4l2Device, lock: &Lock) -> Result<(i32, Option<Strin
             info.name
         ));
     }
+    if info.minimum > info.maximum {
+        return Err(format!(
+            "{} reports an empty range {}..={}",
+            info.name, info.minimum, info.maximum
+        ));
+    }
     let value = lock.value.clamp(info.minimum, info.maximum);
     let note = (value != lock.value).then(|| {
         format!(

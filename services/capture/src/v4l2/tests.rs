@@ -91,6 +91,21 @@ fn ioctl_numbers_match_the_kernel() {
             nix::request_code_readwrite!(b'V', 22, size_of::<sys::StreamParm>()),
             0xc0cc_5616
         );
+        // The enumeration and control calls of the negotiation and the control lock.
+        for (nr, size, code) in [
+            (2, size_of::<sys::FmtDesc>(), 0xc040_5602),
+            (27, size_of::<sys::Control>(), 0xc008_561b),
+            (28, size_of::<sys::Control>(), 0xc008_561c),
+            (36, size_of::<sys::QueryCtrl>(), 0xc044_5624),
+            (74, size_of::<sys::FrmSizeEnum>(), 0xc02c_564a),
+            (75, size_of::<sys::FrmIvalEnum>(), 0xc034_564b),
+        ] {
+            assert_eq!(
+                nix::request_code_readwrite!(b'V', nr, size),
+                code,
+                "ioctl {nr}"
+            );
+        }
     }
 }
 
