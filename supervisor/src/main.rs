@@ -145,7 +145,12 @@ enum Command {
         /// of a comma-separated list (e.g. `--vshift=-4,-2,2,4`); with --degrade the shift
         /// replaces the defects' own 1 px. The row alignment (stereo.*.row_align) is what
         /// should undo it.
-        #[arg(long, value_name = "N[,N...]", value_delimiter = ',', allow_negative_numbers = true)]
+        #[arg(
+            long,
+            value_name = "N[,N...]",
+            value_delimiter = ',',
+            allow_negative_numbers = true
+        )]
         vshift: Vec<i32>,
         #[command(flatten)]
         base: stereo_cli::StereoBase,

@@ -24,6 +24,9 @@ pub struct StereoBase {
     /// Do not equalise the right image's mean to the left's before matching.
     #[arg(long)]
     pub no_equalize: bool,
+    /// Do not measure and remove the vertical offset between the images (row_align).
+    #[arg(long)]
+    pub no_row_align: bool,
 }
 
 impl StereoBase {
@@ -41,6 +44,9 @@ impl StereoBase {
         };
         if self.no_equalize {
             cfg.equalize = false;
+        }
+        if self.no_row_align {
+            cfg.row_align.enabled = false;
         }
         Ok(cfg)
     }
@@ -510,6 +516,44 @@ pub fn bench(
                 );
             }
             rows.push(row);
+        }
+        // The row alignment's measurement on its own, and amortised over the frames between
+        // two measurements (the matchers' rows above include it).
+        let (lv, rv) = (ImageView::new(&l, w, h)?, ImageView::new(&r, w, h)?);
+        let ra = &base_cfg.row_align;
+        let mut times = Vec::with_capacity(frames.max(1));
+        let mut found = None;
+        for _ in 0..frames.max(1) {
+            let t = Instant::now();
+            found = hvs_stereo::rowalign::estimate_shift(
+                lv,
+                rv,
+                min_disp as usize,
+                max_disp as usize,
+                ra.max_shift_px as usize,
+            );
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        let median = times[times.len() / 2];
+        if !json {
+            println!(
+                "{:<10} {:<8} {:>9} {:>9.3} {:>9} {:>9} {:>12}   (every {} frames: {:.3} ms a frame; \
+                 estimate {})",
+                "row-align",
+                format!("{w}x{h}"),
+                format!("+-{}", ra.max_shift_px),
+                median,
+                "",
+                "",
+                "",
+                ra.every_n_frames,
+                median / ra.every_n_frames as f64,
+                found.map_or("none".to_string(), |e| format!(
+                    "{:+.2} px, {} of {} votes",
+                    e.shift_px, e.agreeing, e.votes
+                ))
+            );
         }
     }
     if json {

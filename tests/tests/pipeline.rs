@@ -3,7 +3,7 @@
 use std::time::{Duration, Instant};
 
 use hvs_shared::ipc::IpcNode;
-use hvs_shared::messages::{MotionCommand, SendReason};
+use hvs_shared::messages::{MotionCommand, RowAlignState, SendReason};
 use hvs_shared::topics;
 use hvs_tests::{Pipeline, hvs, iceoryx_files, pid_of, signal_pid, stage, write_config};
 use nix::sys::signal::Signal;
@@ -382,4 +382,55 @@ fn sigkill_of_the_supervisor_stops_the_wheels() {
             "{name} (pid {pid}) outlived its supervisor"
         );
     }
+}
+
+/// A right camera mounted 4 rows (at 640x480) lower: both stereo stages measure the offset
+/// from the images, correct it before matching and say so in every disparity header and in
+/// their notes.
+#[test]
+fn a_vertically_misaligned_camera_is_measured_and_corrected() {
+    let p = Pipeline::start(
+        "vshift",
+        &[("vertical_shift_px = 0 ", "vertical_shift_px = 4 ")],
+        "",
+    );
+    p.wait_all_running(Duration::from_secs(60));
+    let node = IpcNode::create(&p.instance, "e2e-vshift").expect("node");
+    let lo = node.subscriber(&topics::DISPARITY_LO, 2).expect("lo");
+    let hi = node.subscriber(&topics::DISPARITY_HI, 2).expect("hi");
+    // (320x240: the same offset is 2 rows.)
+    let mut seen = [None, None];
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while seen.iter().any(Option::is_none) {
+        assert!(
+            Instant::now() < deadline,
+            "no corrected maps: {seen:?}\n{}",
+            p.logs()
+        );
+        if let Some(s) = lo.receive().expect("receive lo") {
+            let h = s.payload().header;
+            if h.row_align == RowAlignState::Corrected as u32 {
+                seen[0] = Some(h.row_shift_mpx);
+            }
+        }
+        if let Some(s) = hi.receive().expect("receive hi") {
+            let h = s.payload().header;
+            if h.row_align == RowAlignState::Corrected as u32 {
+                seen[1] = Some(h.row_shift_mpx);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (Some(lo_mpx), Some(hi_mpx)) = (seen[0], seen[1]) else {
+        panic!("no corrected maps: {seen:?}");
+    };
+    println!("tracked offset: 320x240 {lo_mpx} mpx, 640x480 {hi_mpx} mpx");
+    assert!((lo_mpx - 2000).abs() <= 300, "320x240: {lo_mpx} mpx");
+    assert!((hi_mpx - 4000).abs() <= 300, "640x480: {hi_mpx} mpx");
+    let s = p.wait_status("the offset in the notes", Duration::from_secs(10), |s| {
+        stage(s, "stereo-hi")["note"]
+            .as_str()
+            .is_some_and(|n| n.contains("rows +4.0 px") || n.contains("rows +3.9 px"))
+    });
+    println!("stereo-hi note: {}", stage(&s, "stereo-hi")["note"]);
 }

@@ -4,8 +4,9 @@
 use hvs_shared::messages::{
     ActuatorReport, ControlCommand, ControlRequest, Decision, DisparityHeader, DisparityMap320x240,
     DisparityMap640x480, FrameHeader, FrameSource, IntersectionType, MotionCommand, RangeReport,
-    RangeSource, RangeWindow, SendReason, SimTruth, StageHealth, StageHeartbeat, StageState,
-    StereoAlgorithm, StereoFrame320x240, StereoFrame640x480, SupervisorStatus, decode_name,
+    RangeSource, RangeWindow, RowAlignState, SendReason, SimTruth, StageHealth, StageHeartbeat,
+    StageState, StereoAlgorithm, StereoFrame320x240, StereoFrame640x480, SupervisorStatus,
+    decode_name,
 };
 use serde_json::{Value, json};
 
@@ -85,7 +86,7 @@ fn algorithm_label(code: u32) -> &'static str {
 fn disparity_text(h: &DisparityHeader) -> String {
     let pixels = (h.width as f64 * h.height as f64).max(1.0);
     format!(
-        "disparity {} {}x{} {} d {}..{} px valid {:.1}% compute {:.2} ms capture->publish {:.2} ms",
+        "disparity {} {}x{} {} d {}..{} px valid {:.1}% compute {:.2} ms capture->publish {:.2} ms rows {:+.2} px {}",
         h.frame_id,
         h.width,
         h.height,
@@ -94,7 +95,9 @@ fn disparity_text(h: &DisparityHeader) -> String {
         h.max_disp,
         100.0 * h.valid_px as f64 / pixels,
         ms(h.compute_ns),
-        span_ms(h.capture_ns, h.published_ns)
+        span_ms(h.capture_ns, h.published_ns),
+        h.row_shift_mpx as f64 / 1000.0,
+        RowAlignState::from_code(h.row_align).map_or("?", RowAlignState::label)
     )
 }
 
@@ -107,6 +110,8 @@ fn disparity_json(h: &DisparityHeader) -> Value {
         "min_disp": h.min_disp,
         "max_disp": h.max_disp,
         "valid_px": h.valid_px,
+        "row_shift_px": h.row_shift_mpx as f64 / 1000.0,
+        "row_align": RowAlignState::from_code(h.row_align).map_or("?", RowAlignState::label),
         "compute_ms": ms(h.compute_ns),
         "capture_ns": h.capture_ns,
         "published_ns": h.published_ns,
