@@ -660,6 +660,10 @@ pub struct FusionConfig {
     /// A fast-path window with fewer valid pixels than this takes a fresh 640x480 value
     /// instead (the fast path cannot see beyond its disparity range).
     pub min_valid_px: u32,
+    /// Edge pixels whose disparity confidence (0..1, the stereo stage's plane) is below this
+    /// are left out of the ranges; the others weigh by their confidence in the mean and in
+    /// the window's confidence.
+    pub min_confidence: f32,
 }
 
 impl Default for FusionConfig {
@@ -675,6 +679,7 @@ impl Default for FusionConfig {
             min_height_m: 0.05,
             max_height_m: 1.5,
             min_valid_px: 30,
+            min_confidence: 0.05,
         }
     }
 }
@@ -1207,6 +1212,12 @@ impl HvsConfig {
                     "= {} must be below canny_high = {}",
                     f.canny_low, f.canny_high
                 ),
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.fusion.min_confidence) {
+            return Err(self.invalid(
+                "fusion.min_confidence",
+                format!("= {} must be in 0..=1", self.fusion.min_confidence),
             ));
         }
         if !(0.0..=50.0).contains(&f.near_percentile) {

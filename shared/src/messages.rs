@@ -319,8 +319,9 @@ macro_rules! disparity_map {
     ($name:ident, $type_name:literal, $w:expr, $h:expr, $doc:literal) => {
         #[doc = $doc]
         ///
-        /// Layout: a [`DisparityHeader`] then `disparity_q8`, row-major u16 (little endian on
-        /// every supported target), disparity x 256 of each left-image pixel, 0 = invalid.
+        /// Layout: a [`DisparityHeader`], then `disparity_q8`, row-major u16 (little endian on
+        /// every supported target), disparity x 256 of each left-image pixel, 0 = invalid,
+        /// then `confidence`, row-major u8, one per pixel.
         #[repr(C)]
         #[derive(Debug, Clone, Copy, Pod, Zeroable, ZeroCopySend)]
         #[type_name($type_name)]
@@ -329,6 +330,10 @@ macro_rules! disparity_map {
             pub header: DisparityHeader,
             /// Disparity of each left pixel in 1/256 px, 0 = invalid.
             pub disparity_q8: [u16; $w * $h],
+            /// Confidence of each disparity, 0 (none) ..= 255 (certain), from the matcher's
+            /// cost curve and left-right check (255 for every valid pixel of a matcher
+            /// without one, and of the simulator's exact map).
+            pub confidence: [u8; $w * $h],
         }
 
         impl $name {
@@ -997,8 +1002,8 @@ mod tests {
         assert_eq!(size_of::<StereoFrame320x240>(), 72 + 2 * 76_800);
         assert_eq!(size_of::<StereoFrame640x480>(), 72 + 2 * 307_200);
         assert_eq!(size_of::<DisparityHeader>(), 72);
-        assert_eq!(size_of::<DisparityMap320x240>(), 72 + 2 * 76_800);
-        assert_eq!(size_of::<DisparityMap640x480>(), 72 + 2 * 307_200);
+        assert_eq!(size_of::<DisparityMap320x240>(), 72 + 3 * 76_800);
+        assert_eq!(size_of::<DisparityMap640x480>(), 72 + 3 * 307_200);
         assert_eq!(size_of::<RangeWindow>(), 24);
         assert_eq!(size_of::<RangeReport>(), 440);
         assert_eq!(size_of::<ObstacleScan>(), 264);

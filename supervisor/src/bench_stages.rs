@@ -48,11 +48,14 @@ pub fn run(config_path: &std::path::Path, frames: usize) -> Result<()> {
         let (mut left, mut right) = (vec![0u8; w * h], vec![0u8; w * h]);
         world.render(0.0, &mut left, &mut right, None)?;
         let mut disparity = vec![0u16; w * h];
-        matcher_for(stereo)?.compute(
+        let mut matcher = matcher_for(stereo)?;
+        matcher.compute(
             ImageView::new(&left, w, h)?,
             ImageView::new(&right, w, h)?,
             &mut disparity,
         )?;
+        let mut confidence = vec![0u8; w * h];
+        hvs_stereo::confidence_or_validity(matcher.as_ref(), &disparity, &mut confidence);
         let size = format!("{w}x{h}");
         let row =
             |step: &str, (m, p): (f64, f64)| println!("{size:<9} {step:<34} {m:>10.1} {p:>10.1}");
@@ -76,7 +79,7 @@ pub fn run(config_path: &std::path::Path, frames: usize) -> Result<()> {
         row(
             "fusion (edges+fuse+windows+scan)",
             time_us(frames, || {
-                windows = path.ranges(&left, &disparity).0;
+                windows = path.ranges(&left, &disparity, Some(&confidence)).0;
             }),
         );
         let scan = *path.scan();

@@ -135,7 +135,7 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport> {
         let lv = ImageView::new(&left, w, h)?;
         let rv = ImageView::new(&right, w, h)?;
         matcher.compute(lv, rv, &mut disparity)?;
-        let (windows, _, _) = fusion.ranges(&left, &disparity);
+        let (windows, _, _) = fusion.ranges(&left, &disparity, matcher.confidence());
         // The decision is made (and published) after the frame's processing time.
         let now = ns(t) + 1;
         let nd = nav.decide(&windows, config.fusion.windows as usize, fusion.scan(), now);

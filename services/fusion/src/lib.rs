@@ -63,6 +63,8 @@ pub struct RangeParams {
     pub min_height_m: f64,
     /// Points above this height are ignored (0 disables).
     pub max_height_m: f64,
+    /// Points whose disparity confidence is below this (0..=255) are left out.
+    pub min_confidence: u8,
 }
 
 impl RangeParams {
@@ -80,6 +82,7 @@ impl RangeParams {
             camera_height_m: config.camera.height_m,
             min_height_m: f.min_height_m,
             max_height_m: f.max_height_m,
+            min_confidence: (f.min_confidence.clamp(0.0, 1.0) * 255.0).round() as u8,
         }
     }
 }
@@ -88,6 +91,8 @@ impl RangeParams {
 #[derive(Debug, Default)]
 pub struct WindowRanger {
     ranges: Vec<Vec<f32>>,
+    /// Per window: the sum of the kept points' confidence weights and of weight x range.
+    weights: Vec<(f64, f64)>,
 }
 
 impl WindowRanger {
@@ -101,10 +106,14 @@ impl WindowRanger {
     /// at height `h` sees a pixel of row `v` with disparity `d` at height
     /// `h - (v - cy) * b / d` (the reference had no such filter: floor texture pulled its
     /// ranges down). `range_m` is the configured statistic; `mean_m` (the reference) and
-    /// `near_m` (the near percentile) are always filled.
+    /// `near_m` (the near percentile) are always filled. With a `confidence` plane (one
+    /// byte per pixel of the map), points below `p.min_confidence` are left out and the rest
+    /// weigh by their confidence in `mean_m` and in the window's `confidence`; the
+    /// percentiles and the median are over the points kept.
     pub fn compute(
         &mut self,
         fused_q8: &[u16],
+        confidence: Option<&[u8]>,
         width: usize,
         p: &RangeParams,
         source: RangeSource,
@@ -112,6 +121,9 @@ impl WindowRanger {
         let window_count = p.window_count.clamp(1, MAX_RANGE_WINDOWS);
         self.ranges.resize_with(window_count, Vec::new);
         self.ranges.iter_mut().for_each(Vec::clear);
+        self.weights.clear();
+        self.weights.resize(window_count, (0.0, 0.0));
+        let confidence = confidence.filter(|c| c.len() == fused_q8.len());
         let height = fused_q8.len() / width.max(1);
         let cy = (height as f64 - 1.0) / 2.0;
         let b = p.depth.baseline_m;
@@ -131,18 +143,36 @@ impl WindowRanger {
                 {
                     continue;
                 }
+                let weight = match confidence {
+                    Some(c) => {
+                        let c = c[v * width + x];
+                        if c < p.min_confidence {
+                            continue;
+                        }
+                        c as f64 / 255.0
+                    }
+                    None => 1.0,
+                };
                 let w = x * window_count / width;
-                self.ranges[w].push((fb / d_px) as f32);
+                let range = fb / d_px;
+                self.ranges[w].push(range as f32);
+                let acc = &mut self.weights[w];
+                acc.0 += weight;
+                acc.1 += weight * range;
             }
         }
         let mut out = [RangeWindow::default(); MAX_RANGE_WINDOWS];
-        for (slot, ranges) in out.iter_mut().zip(self.ranges.iter_mut()) {
-            if ranges.is_empty() {
+        for ((slot, ranges), &(weight, weighted)) in out
+            .iter_mut()
+            .zip(self.ranges.iter_mut())
+            .zip(&self.weights)
+        {
+            if ranges.is_empty() || weight <= 0.0 {
                 continue;
             }
             ranges.sort_unstable_by(f32::total_cmp);
             let n = ranges.len();
-            let mean = ranges.iter().map(|&r| r as f64).sum::<f64>() / n as f64;
+            let mean = weighted / weight;
             let pct = |q: f64| ranges[((n - 1) as f64 * q / 100.0).round() as usize];
             let near = pct(p.near_percentile);
             let trimmed = {
@@ -150,10 +180,10 @@ impl WindowRanger {
                 let mid = &ranges[cut..n - cut];
                 mid.iter().map(|&r| r as f64).sum::<f64>() / mid.len() as f64
             };
-            // Confidence: evidence (50 pixels give 0.5, 200 give 0.8) times agreement (the
-            // interquartile range relative to the median).
+            // Confidence: evidence (50 fully confident pixels give 0.5, 200 give 0.8) times
+            // agreement (the interquartile range relative to the median).
             let spread = (pct(75.0) - pct(25.0)) as f64 / pct(50.0).max(1e-3) as f64;
-            let evidence = n as f64 / (n as f64 + 50.0);
+            let evidence = weight / (weight + 50.0);
             *slot = RangeWindow {
                 range_m: match p.statistic {
                     RangeStatistic::Mean => mean as f32,
@@ -314,11 +344,13 @@ impl FusionPath {
     }
 
     /// Ranges of one frame: returns (windows, edge pixels, edge pixels with disparity).
-    /// `left` and `disparity_q8` must hold `width * height` values.
+    /// `left`, `disparity_q8` and `confidence` (the stereo stage's plane, if any) must hold
+    /// `width * height` values.
     pub fn ranges(
         &mut self,
         left: &[u8],
         disparity_q8: &[u16],
+        confidence: Option<&[u8]>,
     ) -> ([RangeWindow; MAX_RANGE_WINDOWS], u32, u32) {
         let (w, h) = (self.width, self.height);
         match self.detector {
@@ -333,7 +365,7 @@ impl FusionPath {
         let (edge_px, valid) = fuse(&self.edges, disparity_q8, &mut self.fused);
         let windows = self
             .ranger
-            .compute(&self.fused, w, &self.params, self.source);
+            .compute(&self.fused, confidence, w, &self.params, self.source);
         self.scan = self.scanner.compute(disparity_q8, w, &self.params);
         (windows, edge_px, valid)
     }
@@ -393,6 +425,7 @@ mod tests {
             camera_height_m: 0.25,
             min_height_m: 0.0,
             max_height_m: 0.0,
+            min_confidence: 13,
         }
     }
 
@@ -484,6 +517,7 @@ mod tests {
         }
         let w = WindowRanger::new().compute(
             &fused,
+            None,
             width,
             &params(3, RangeStatistic::Mean),
             RangeSource::Lo,
@@ -504,8 +538,9 @@ mod tests {
         let mut fused = vec![(19.2 * 256.0) as u16; width];
         fused[9] = 256; // 1 px disparity = 19.2 m: a gross mismatch
         let mut ranger = WindowRanger::new();
-        let mut run =
-            |statistic| ranger.compute(&fused, width, &params(1, statistic), RangeSource::Lo)[0];
+        let mut run = |statistic| {
+            ranger.compute(&fused, None, width, &params(1, statistic), RangeSource::Lo)[0]
+        };
         let mean = run(RangeStatistic::Mean);
         assert!(mean.range_m > 2.0, "{mean:?}");
         for statistic in [
@@ -533,6 +568,7 @@ mod tests {
             .collect();
         let w = WindowRanger::new().compute(
             &fused,
+            None,
             width,
             &params(1, RangeStatistic::Median),
             RangeSource::Lo,
@@ -542,11 +578,51 @@ mod tests {
         let uniform = vec![(9.6 * 256.0) as u16; width];
         let u = WindowRanger::new().compute(
             &uniform,
+            None,
             width,
             &params(1, RangeStatistic::Median),
             RangeSource::Lo,
         )[0];
         assert!(u.confidence > w.confidence, "{u:?} vs {w:?}");
+    }
+
+    #[test]
+    fn low_confidence_points_are_left_out_and_the_rest_weigh_by_confidence() {
+        let width = 20;
+        // 10 pixels at 1 m, 10 at 4 m; the far ones are mismatches the matcher doubted.
+        let fused: Vec<u16> = (0..width)
+            .map(|x| {
+                if x < 10 {
+                    (19.2 * 256.0) as u16
+                } else {
+                    (4.8 * 256.0) as u16
+                }
+            })
+            .collect();
+        let mut confidence = vec![250u8; width];
+        confidence[10..].fill(5);
+        let p = params(1, RangeStatistic::Mean);
+        let plain = WindowRanger::new().compute(&fused, None, width, &p, RangeSource::Lo)[0];
+        assert!((plain.range_m - 2.5).abs() < 0.01, "{plain:?}");
+        let w =
+            WindowRanger::new().compute(&fused, Some(&confidence), width, &p, RangeSource::Lo)[0];
+        assert_eq!(w.valid_px, 10, "{w:?}");
+        assert!((w.range_m - 1.0).abs() < 0.01, "{w:?}");
+        // Kept points of unequal confidence: the mean leans to the confident ones.
+        confidence[10..].fill(50);
+        let w =
+            WindowRanger::new().compute(&fused, Some(&confidence), width, &p, RangeSource::Lo)[0];
+        assert_eq!(w.valid_px, 20);
+        let expected = (250.0 * 1.0 + 50.0 * 4.0) / 300.0;
+        assert!((w.mean_m as f64 - expected).abs() < 0.01, "{w:?}");
+        // Less confident evidence, lower window confidence.
+        let sure =
+            WindowRanger::new().compute(&fused[..10], Some(&[250u8; 10]), 10, &p, RangeSource::Lo)
+                [0];
+        let unsure =
+            WindowRanger::new().compute(&fused[..10], Some(&[60u8; 10]), 10, &p, RangeSource::Lo)
+                [0];
+        assert!(sure.confidence > unsure.confidence, "{sure:?} {unsure:?}");
     }
 
     #[test]
@@ -566,12 +642,12 @@ mod tests {
         let mut p = params(1, RangeStatistic::Mean);
         p.min_height_m = 0.05;
         p.max_height_m = 1.5;
-        let w = WindowRanger::new().compute(&fused, width, &p, RangeSource::Lo)[0];
+        let w = WindowRanger::new().compute(&fused, None, width, &p, RangeSource::Lo)[0];
         assert_eq!(w.valid_px, 1, "{w:?}");
         assert!((w.range_m - 1.0).abs() < 0.01);
         p.min_height_m = 0.0;
         p.max_height_m = 0.0;
-        let all = WindowRanger::new().compute(&fused, width, &p, RangeSource::Lo)[0];
+        let all = WindowRanger::new().compute(&fused, None, width, &p, RangeSource::Lo)[0];
         assert_eq!(all.valid_px, 3);
     }
 

@@ -80,7 +80,9 @@ impl HiSide {
             self.unpaired += 1;
             return Ok(());
         };
-        let (windows, _, _) = self.path.ranges(&frame.payload().left, &m.disparity_q8);
+        let (windows, _, _) =
+            self.path
+                .ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
         if self.results.len() == HI_RESULTS_KEPT {
             self.results.pop_front();
         }
@@ -146,7 +148,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     continue;
                 };
                 let (lo_windows, edge_px, valid_edge_px) =
-                    lo_path.ranges(&frame.payload().left, &m.disparity_q8);
+                    lo_path.ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
                 let hi_ranges = match frame.payload().header.replay_hi_frame_id {
                     0 => hi.results.back().filter(|h| {
                         m.header.capture_ns.saturating_sub(h.capture_ns) <= hi_max_age_ns

@@ -137,6 +137,26 @@ pub trait StereoMatcher: Send {
         right: ImageView<'_>,
         out_q8: &mut [u16],
     ) -> Result<MatchStats, StereoError>;
+
+    /// The confidence of the last map computed, one byte a pixel (0 = no disparity, 255 =
+    /// certain), from the matcher's cost curve; `None` for a matcher that has none (the
+    /// stage then publishes 255 wherever the map has a disparity).
+    fn confidence(&self) -> Option<&[u8]> {
+        None
+    }
+}
+
+/// Fills `out` with the confidence of a map: the matcher's own where it has one, else 255
+/// wherever `disparity_q8` has a value and 0 elsewhere.
+pub fn confidence_or_validity(matcher: &dyn StereoMatcher, disparity_q8: &[u16], out: &mut [u8]) {
+    match matcher.confidence() {
+        Some(c) if c.len() == out.len() => out.copy_from_slice(c),
+        _ => {
+            for (o, &d) in out.iter_mut().zip(disparity_q8) {
+                *o = if d == 0 { 0 } else { 255 };
+            }
+        }
+    }
 }
 
 /// Checks that a pair and an output buffer agree in size.

@@ -1,8 +1,8 @@
 //! Stereo stage process: `stereo-lo` (320x240 fast path) or `stereo-hi` (640x480 long range).
 //!
 //! Takes the newest frame pair from shared memory (older ones are dropped and counted: the
-//! stage always works on the freshest scene), matches it, and writes the disparity map directly
-//! into a loaned output sample: the full map is never copied.
+//! stage always works on the freshest scene), matches it, and writes the disparity map and its
+//! confidence plane directly into a loaned output sample: the full map is never copied.
 
 use std::process::ExitCode;
 
@@ -22,18 +22,30 @@ fn main() -> ExitCode {
             rt,
             &topics::FRAMES_HI,
             &topics::DISPARITY_HI,
-            |m: &mut DisparityMap640x480| (&mut m.header, &mut m.disparity_q8[..]),
+            |m: &mut DisparityMap640x480| {
+                (
+                    &mut m.header,
+                    &mut m.disparity_q8[..],
+                    &mut m.confidence[..],
+                )
+            },
         ),
         _ => run_path(
             rt,
             &topics::FRAMES_LO,
             &topics::DISPARITY_LO,
-            |m: &mut DisparityMap320x240| (&mut m.header, &mut m.disparity_q8[..]),
+            |m: &mut DisparityMap320x240| {
+                (
+                    &mut m.header,
+                    &mut m.disparity_q8[..],
+                    &mut m.confidence[..],
+                )
+            },
         ),
     })
 }
 
-type MapParts<M> = fn(&mut M) -> (&mut DisparityHeader, &mut [u16]);
+type MapParts<M> = fn(&mut M) -> (&mut DisparityHeader, &mut [u16], &mut [u8]);
 
 /// The row alignment as the stage reports it: in every map's header, in the note, and as a
 /// warning when the offset is beyond `row_align.warn_px` (again every 10 s while it is).
@@ -176,7 +188,7 @@ where
                 return Ok(LoopControl::Continue);
             }
         };
-        let (out_header, out) = map_parts(sample.payload_mut());
+        let (out_header, out, confidence) = map_parts(sample.payload_mut());
         let started = monotonic_ns();
         let stats = match matcher.compute(left, right, out) {
             Ok(s) => s,
@@ -185,6 +197,7 @@ where
                 return Ok(LoopControl::Continue);
             }
         };
+        hvs_stereo::confidence_or_validity(matcher.as_ref(), out, confidence);
         let done = monotonic_ns();
         row.update(stats.row_align);
         *out_header = DisparityHeader {

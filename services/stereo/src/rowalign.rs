@@ -392,6 +392,10 @@ impl StereoMatcher for AlignedMatcher {
         stats.row_align = Some(status);
         Ok(stats)
     }
+
+    fn confidence(&self) -> Option<&[u8]> {
+        self.inner.confidence()
+    }
 }
 
 #[cfg(test)]
