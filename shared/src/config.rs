@@ -443,6 +443,10 @@ pub struct StereoConfig {
     pub speckle_window_px: u32,
     /// Neighbouring disparities within this many px belong to the same region.
     pub speckle_range_px: u32,
+    /// Fill runs of at most this many invalid pixels along a row with the farther of the
+    /// disparities at their two ends, at confidence 1 (fusion leaves such pixels out; 0
+    /// disables; sgm only).
+    pub fill_invalid_px: u32,
     /// Block-matching settings.
     pub bm: BlockMatchConfig,
     /// Semi-global matching settings.
@@ -519,6 +523,7 @@ impl Default for StereoConfig {
             subpixel: true,
             speckle_window_px: 40,
             speckle_range_px: 1,
+            fill_invalid_px: 16,
             bm: BlockMatchConfig::default(),
             sgm: SgmConfig::default(),
             ogale: OgaleConfig::default(),
@@ -1113,6 +1118,12 @@ impl HvsConfig {
             ("stereo.lo", &self.stereo.lo, 320),
             ("stereo.hi", &self.stereo.hi, 640),
         ] {
+            if cfg.fill_invalid_px > 256 {
+                return Err(self.invalid(
+                    &format!("{key}.fill_invalid_px"),
+                    format!("= {} must be in 0..=256 px", cfg.fill_invalid_px),
+                ));
+            }
             if let Err((sub, message)) = cfg.row_align.validate() {
                 return Err(self.invalid(&format!("{key}.{sub}"), message));
             }

@@ -225,7 +225,14 @@ impl ObstacleScanner {
 
     /// The scan of a disparity map of `width` columns (1/256 px, 0 = no data), with the
     /// height filter of `p`.
-    pub fn compute(&mut self, disparity_q8: &[u16], width: usize, p: &RangeParams) -> ObstacleScan {
+    /// Points whose `confidence` (when given) is below `p.min_confidence` are left out.
+    pub fn compute(
+        &mut self,
+        disparity_q8: &[u16],
+        confidence: Option<&[u8]>,
+        width: usize,
+        p: &RangeParams,
+    ) -> ObstacleScan {
         self.depths.resize_with(SCAN_BINS, Vec::new);
         self.depths.iter_mut().for_each(Vec::clear);
         let mut scan = ObstacleScan {
@@ -263,8 +270,11 @@ impl ObstacleScanner {
                 continue;
             }
             let lo_q8 = lo_q8 as u16;
+            let conf_row = confidence
+                .filter(|c| c.len() == disparity_q8.len())
+                .map(|c| &c[v * width..(v + 1) * width]);
             for (x, &d) in row.iter().enumerate() {
-                if d >= lo_q8 {
+                if d >= lo_q8 && conf_row.is_none_or(|c| c[x] >= p.min_confidence) {
                     let bin = x * SCAN_BINS / width;
                     self.depths[bin].push((fb * DISPARITY_SCALE as f64 / d as f64) as f32);
                 }
@@ -366,7 +376,9 @@ impl FusionPath {
         let windows = self
             .ranger
             .compute(&self.fused, confidence, w, &self.params, self.source);
-        self.scan = self.scanner.compute(disparity_q8, w, &self.params);
+        self.scan = self
+            .scanner
+            .compute(disparity_q8, confidence, w, &self.params);
         (windows, edge_px, valid)
     }
 
@@ -469,7 +481,7 @@ mod tests {
         }
         let mut p = params(3, RangeStatistic::Median);
         p.min_height_m = 0.05;
-        let scan = ObstacleScanner::new().compute(&disp, w, &p);
+        let scan = ObstacleScanner::new().compute(&disp, None, w, &p);
         assert!((scan.tan_half_fov - 32.0 / 320.0).abs() < 1e-6);
         for (i, &r) in scan.range_m.iter().enumerate() {
             let want = if i < 32 { 1.0 } else { 2.0 };
@@ -480,15 +492,15 @@ mod tests {
         floor_only[..w * h / 2].fill(0);
         assert_eq!(
             ObstacleScanner::new()
-                .compute(&floor_only, w, &p)
+                .compute(&floor_only, None, w, &p)
                 .valid_bins(),
             0
         );
         p.min_height_m = 0.0;
-        let floor = ObstacleScanner::new().compute(&floor_only, w, &p);
+        let floor = ObstacleScanner::new().compute(&floor_only, None, w, &p);
         assert_eq!(floor.valid_bins(), SCAN_BINS);
         // Too few points: no range; a long-range scan fills the gap and is counted.
-        let empty = ObstacleScanner::new().compute(&vec![0u16; w * h], w, &p);
+        let empty = ObstacleScanner::new().compute(&vec![0u16; w * h], None, w, &p);
         assert_eq!(empty.valid_bins(), 0);
         let merged = merge_scans(&empty, Some(&scan));
         assert_eq!((merged.valid_bins(), merged.hi_bins), (64, 64));

@@ -157,6 +157,36 @@ pub fn median3x3(src: &[u16], width: usize, height: usize, dst: &mut [u16]) {
     }
 }
 
+/// Fills runs of invalid pixels of at most `max_gap` along each row from the background
+/// side: with a valid disparity on both ends of the run, the smaller (farther) one, since a
+/// pixel that fails the left-right check next to a depth edge is most often background the
+/// foreground occludes in the other view; runs touching the image border are left alone.
+/// Returns the pixels filled.
+pub fn fill_from_background(q8: &mut [u16], width: usize, max_gap: usize) -> usize {
+    let mut filled = 0;
+    for row in q8.chunks_exact_mut(width.max(1)) {
+        let mut x = 0;
+        while x < row.len() {
+            if row[x] != 0 {
+                x += 1;
+                continue;
+            }
+            let start = x;
+            while x < row.len() && row[x] == 0 {
+                x += 1;
+            }
+            let len = x - start;
+            if start == 0 || x == row.len() || len > max_gap {
+                continue;
+            }
+            let fill = row[start - 1].min(row[x]);
+            row[start..x].fill(fill);
+            filled += len;
+        }
+    }
+    filled
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

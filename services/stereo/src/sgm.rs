@@ -123,6 +123,8 @@ pub struct SgmParams {
     pub speckle_window_px: u32,
     /// Neighbours within this many px belong to the same speckle region.
     pub speckle_range_px: u32,
+    /// Fill invalid runs up to this long from the background side (0 = off).
+    pub fill_invalid_px: u32,
     /// Minimum mean |horizontal gradient| of the left image over the texture window, grey
     /// levels per pixel; flatter pixels come out invalid (0 disables).
     pub texture_threshold: f32,
@@ -148,6 +150,7 @@ impl SgmParams {
             subpixel: config.subpixel,
             speckle_window_px: config.speckle_window_px,
             speckle_range_px: config.speckle_range_px,
+            fill_invalid_px: config.fill_invalid_px,
             texture_threshold: config.sgm.texture_threshold,
             texture_radius: config.sgm.texture_radius,
         }
@@ -567,6 +570,17 @@ impl StereoMatcher for SgmMatcher {
         for (c, &d) in s.confidence.iter_mut().zip(out_q8.iter()) {
             if d == 0 {
                 *c = 0;
+            }
+        }
+        if p.fill_invalid_px > 0 {
+            // Runs touching the border (the columns left of min_disp) stay empty.
+            crate::post::fill_from_background(out_q8, w, p.fill_invalid_px as usize);
+            // A filled pixel has no match of its own: the lowest confidence, which fusion
+            // leaves out of the ranges and the obstacle scan.
+            for (c, &d) in s.confidence.iter_mut().zip(out_q8.iter()) {
+                if d != 0 && *c == 0 {
+                    *c = FILLED_CONFIDENCE;
+                }
             }
         }
         let valid = out_q8.iter().filter(|&&d| d != 0).count();
@@ -1070,6 +1084,9 @@ fn confidence_row(win: &Winners, out: &[u16], conf: &mut [u8]) {
         *c = (1.0 + 254.0 * r / (r + 0.05)).round() as u8;
     }
 }
+
+/// The confidence of a pixel filled from the background side ([`crate::post::fill_from_background`]).
+pub const FILLED_CONFIDENCE: u8 = 1;
 
 /// Pixels whose S the AVX2 kernels buffer before picking their winners.
 const PICK_BLOCK: usize = 32;
@@ -3111,6 +3128,8 @@ mod tests {
             // The penalties recommended for the config default (see the module notes).
             cfg.sgm.p1 = 16;
             cfg.sgm.p2 = 48;
+            // The matches themselves: filled pixels (confidence 1) would count as claims.
+            cfg.fill_invalid_px = 0;
             for (label, right) in [
                 ("clean", scene.right.clone()),
                 ("degraded", degraded_right(scene)),
