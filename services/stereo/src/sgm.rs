@@ -1065,23 +1065,23 @@ fn sweep(
 /// Scalar: it costs one pass over the row and gives the same bytes on every CPU.
 fn confidence_row(win: &Winners, out: &[u16], conf: &mut [u8]) {
     let w = out.len();
-    for (x, (c, &d)) in conf.iter_mut().zip(out).enumerate().take(w) {
-        if d == 0 {
-            *c = 0;
-            continue;
-        }
-        let (lo, hi) = (win.below[x], win.above[x]);
-        let m = match (lo, hi) {
-            (u16::MAX, u16::MAX) => {
-                *c = 128;
-                continue;
-            }
-            (u16::MAX, h) => h,
-            (l, u16::MAX) => l,
-            (l, h) => l.min(h),
-        } as f32;
-        let r = ((m - win.cost[x] as f32) / (m + 1.0)).max(0.0);
-        *c = (1.0 + 254.0 * r / (r + 0.05)).round() as u8;
+    let (cost, below, above) = (&win.cost[..w], &win.below[..w], &win.above[..w]);
+    // Branch-free so that it vectorises: 1 + 254 r / (r + 0.05) with r = (m - S) / (m + 1)
+    // is 1 + 254 (m - S) / ((m - S) + 0.05 (m + 1)), one division.
+    for ((((c, &d), &s), &lo), &hi) in conf[..w]
+        .iter_mut()
+        .zip(out)
+        .zip(cost)
+        .zip(below)
+        .zip(above)
+    {
+        let m = lo.min(hi);
+        let (mf, sf) = (m as f32, s as f32);
+        let gap = (mf - sf).max(0.0);
+        let v = 1.0 + 254.0 * gap / (gap + 0.05 * (mf + 1.0));
+        // + 0.5 then truncation: round half up for these positive values.
+        let v = if m == u16::MAX { 128 } else { (v + 0.5) as u8 };
+        *c = if d == 0 { 0 } else { v };
     }
 }
 
