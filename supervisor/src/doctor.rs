@@ -10,7 +10,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use hvs_capture::v4l2::{CameraMode, DeviceOpener, KernelOpener, StereoCamera, StereoSpec};
+use hvs_capture::v4l2::camera::open_capture_node;
+use hvs_capture::v4l2::{
+    CameraMode, DeviceOpener, KernelOpener, OpenError, StereoCamera, StereoSpec,
+};
 use hvs_shared::config::{CaptureSource, HvsConfig};
 use hvs_shared::messages::{
     DisparityMap320x240, DisparityMap640x480, StereoFrame320x240, StereoFrame640x480,
@@ -225,88 +228,60 @@ fn camera_checks(c: &HvsConfig, opener: &dyn DeviceOpener) -> Vec<Check> {
     ] {
         let names = stable_names(device);
         let by_path = device.starts_with("/dev/v4l/");
-        match opener.open(device) {
-            Ok(mut dev) => {
-                let caps = match dev.query_caps() {
-                    Ok(c) if c.is_streaming_capture() => Some(c),
-                    Ok(c) => {
-                        all_there = false;
-                        checks.push(Check::bad(
-                            Verdict::Fail,
-                            side,
-                            format!(
-                                "{} ({}) is not a streaming video capture node",
-                                device.display(),
-                                c.card
-                            ),
-                            "UVC cameras also create a metadata node: use the camera's other \
-                             /dev/videoN (or its /dev/v4l/by-path name ending in -index0)",
-                        ));
-                        continue;
-                    }
-                    Err(errno) => {
-                        all_there = false;
-                        checks.push(Check::bad(
-                            Verdict::Fail,
-                            side,
-                            format!(
-                                "{} is not a V4L2 device (VIDIOC_QUERYCAP: {errno})",
-                                device.display()
-                            ),
-                            format!("set {key} to a camera"),
-                        ));
-                        continue;
-                    }
-                };
-                let offer = hvs_capture::v4l2::camera::enumerate(dev.as_mut(), device);
-                let detail = format!(
-                    "{} ({}, {}): {}",
-                    device.display(),
-                    caps.as_ref().map_or("?", |c| c.card.as_str()),
-                    caps.as_ref().map_or("?", |c| c.bus_info.as_str()),
-                    offer.map_or_else(|e| e.to_string(), |o| o.summary())
-                );
-                if !by_path && !names.is_empty() {
-                    checks.push(Check::bad(
-                        Verdict::Warn,
-                        side,
-                        detail,
+        // The capture's own open and capability check, so doctor and `hvs run` agree.
+        let (mut dev, caps) = match open_capture_node(opener, device) {
+            Ok(opened) => opened,
+            Err(e) => {
+                all_there = false;
+                let (detail, fix) = match &e {
+                    OpenError::Missing { .. } => (
+                        format!("{} ({key}) not found", device.display()),
                         format!(
-                            "/dev/videoN changes with the plug order: set {key} = {:?}",
-                            names[0].display().to_string()
+                            "plug the Minoru in; video devices present: {}; stable names: ls \
+                             -l /dev/v4l/by-path/",
+                            present(&["/dev/video"])
                         ),
-                    ));
-                } else {
-                    checks.push(Check::ok(side, detail));
-                }
-            }
-            Err(nix::errno::Errno::ENOENT | nix::errno::Errno::ENODEV) => {
-                all_there = false;
-                checks.push(Check::bad(
-                    Verdict::Fail,
-                    side,
-                    format!("{} ({key}) not found", device.display()),
-                    format!(
-                        "plug the Minoru in; video devices present: {}; stable names: ls -l \
-                         /dev/v4l/by-path/",
-                        present(&["/dev/video"])
                     ),
-                ));
-            }
-            Err(errno) => {
-                all_there = false;
-                let fix = if errno == nix::errno::Errno::EACCES {
-                    "add the user to the `video` group (sudo usermod -aG video $USER), then log in again"
-                } else {
-                    "close whatever else uses the camera"
+                    OpenError::Permission { .. } => (
+                        e.to_string(),
+                        "add the user to the `video` group (sudo usermod -aG video $USER), \
+                         then log in again"
+                            .to_string(),
+                    ),
+                    OpenError::NotCapture { .. } => (
+                        e.to_string(),
+                        "its /dev/v4l/by-path name ends in -index0".to_string(),
+                    ),
+                    OpenError::NotV4l2 { .. } => (e.to_string(), format!("set {key} to a camera")),
+                    _ => (
+                        e.to_string(),
+                        "close whatever else uses the camera".to_string(),
+                    ),
                 };
-                checks.push(Check::bad(
-                    Verdict::Fail,
-                    side,
-                    format!("cannot open {}: {errno}", device.display()),
-                    fix,
-                ));
+                checks.push(Check::bad(Verdict::Fail, side, detail, fix));
+                continue;
             }
+        };
+        let offer = hvs_capture::v4l2::camera::enumerate(dev.as_mut(), device);
+        let detail = format!(
+            "{} ({}, {}): {}",
+            device.display(),
+            caps.card,
+            caps.bus_info,
+            offer.map_or_else(|e| e.to_string(), |o| o.summary())
+        );
+        if !by_path && !names.is_empty() {
+            checks.push(Check::bad(
+                Verdict::Warn,
+                side,
+                detail,
+                format!(
+                    "/dev/videoN changes with the plug order: set {key} = {:?}",
+                    names[0].display().to_string()
+                ),
+            ));
+        } else {
+            checks.push(Check::ok(side, detail));
         }
     }
     if !all_there {

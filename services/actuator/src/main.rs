@@ -44,25 +44,22 @@ impl Connection {
                     firmware = %firmware,
                     "servo controller answers: link up, neutral first"
                 );
-                rt.set_health(StageHealth::Running);
                 commander.link_reset();
                 self.note_shown_s = None;
             }
             Some(LinkEvent::Waiting(e)) => {
                 tracing::warn!(state = self.link.state().label(), "{e}; waiting for it");
-                rt.set_health(StageHealth::Degraded);
                 self.note_shown_s = None;
             }
             Some(LinkEvent::Lost(e)) => {
                 rt.count_error();
                 tracing::warn!("{e}; reopening");
-                rt.set_health(StageHealth::Degraded);
                 self.note_shown_s = None;
             }
             None => {}
         }
-        // From the state on every tick: the stage skeleton marks itself running when its
-        // loop starts, whatever the link did before.
+        // Health from the link's state, here only: the stage skeleton marks itself running
+        // when its loop starts, whatever the link did before.
         rt.set_health(if self.link.is_up() {
             StageHealth::Running
         } else {
@@ -89,7 +86,6 @@ impl Connection {
         }
         if let Err(e) = self.link.send(&out.bytes, Instant::now()) {
             rt.report_error("serial link lost", &e);
-            rt.set_health(StageHealth::Degraded);
             self.note_shown_s = None;
             return false;
         }

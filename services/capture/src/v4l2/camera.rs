@@ -57,8 +57,9 @@ pub(crate) fn io_error(device: &Path, op: &'static str, errno: Errno) -> OpenErr
     }
 }
 
-/// Opens `path` and checks that it is a streaming capture node.
-fn open_capture_node(
+/// Opens `path` and checks that it is a streaming capture node (what the capture and `hvs
+/// doctor` both do first).
+pub fn open_capture_node(
     opener: &dyn DeviceOpener,
     path: &Path,
 ) -> Result<(Box<dyn V4l2Device>, DeviceCaps), OpenError> {
