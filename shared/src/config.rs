@@ -312,11 +312,6 @@ impl V4l2Controls {
         }
         Ok(())
     }
-
-    /// True when no control is set.
-    pub fn is_empty(&self) -> bool {
-        *self == Self::default()
-    }
 }
 
 impl Default for V4l2CaptureConfig {

@@ -290,11 +290,6 @@ impl PscLink {
         &self.firmware
     }
 
-    /// Why the link is not up (`None` while up or before the first try).
-    pub fn problem(&self) -> Option<&LinkError> {
-        self.problem.as_ref()
-    }
-
     /// A one-line status for the stage's heartbeat note, e.g. "no servo controller answers
     /// on /dev/ttyUSB0 (waiting 12 s)".
     pub fn note(&self, now: Instant) -> String {

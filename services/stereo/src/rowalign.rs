@@ -247,7 +247,6 @@ pub struct RowAligner {
     frames: u32,
     current: Option<f32>,
     pending: Vec<f32>,
-    last: Option<ShiftEstimate>,
     scratch: Vec<u8>,
 }
 
@@ -271,19 +270,12 @@ impl RowAligner {
             frames: 0,
             current: None,
             pending: Vec::new(),
-            last: None,
             scratch: Vec::new(),
         }
     }
 
-    /// The newest measurement.
-    pub fn last_estimate(&self) -> Option<ShiftEstimate> {
-        self.last
-    }
-
     /// Folds one measurement into the tracked offset.
     pub fn track(&mut self, e: ShiftEstimate) {
-        self.last = Some(e);
         match self.current {
             None => self.current = Some(e.shift_px),
             Some(c) if (e.shift_px - c).abs() <= 1.0 => {
@@ -365,11 +357,6 @@ impl AlignedMatcher {
             min_disp: config.min_disp as usize,
             max_disp: config.max_disp as usize,
         }
-    }
-
-    /// The aligner (its newest measurement and tracked offset).
-    pub fn aligner(&self) -> &RowAligner {
-        &self.aligner
     }
 }
 

@@ -42,11 +42,6 @@ pub struct CameraOffer {
 }
 
 impl CameraOffer {
-    /// The FOURCC codes offered.
-    pub fn fourccs(&self) -> Vec<u32> {
-        self.formats.iter().map(|f| f.fourcc).collect()
-    }
-
     /// The rates offered for `fourcc` at `width x height`: `None` if that size is not
     /// offered, `Some(None)` if it is but its rates are not enumerated.
     fn rates(&self, fourcc: u32, width: u32, height: u32) -> Option<SizeRates> {
