@@ -325,15 +325,15 @@ struct Scratch {
     planes: Aligned,
     /// Costs of one row, `width * dpad`.
     cost: Aligned,
-    /// Raw census costs of the last `block + 1` rows (`width * dpad` each; row `k` in slot
-    /// `k % (block + 1)`), for the block average.
+    /// Horizontal block sums of the raw census costs of the last `block + 1` rows
+    /// (`width * dpad` each; row `k` in slot `k % (block + 1)`), for the block average.
     ring: Vec<u8>,
     /// The row held by each slot of `ring` (`usize::MAX`: none).
     ring_rows: Vec<usize>,
-    /// Column sums of the raw costs over the block's rows, `width * dpad`.
+    /// Block sums: the ring's horizontal sums added over the block's rows, `width * dpad`.
     vsum: Vec<u16>,
-    /// Running block sum of one pixel, `dpad`.
-    hsum: Vec<u16>,
+    /// Raw census costs of one row before [`row_sums`], `width * dpad`.
+    raw: Vec<u8>,
     /// The ← path of one row, `width * dpad`.
     lbuf: Aligned,
     /// S of a block of `PICK_BLOCK` pixels (AVX2 kernels), `dpad` u16 each.
@@ -455,7 +455,7 @@ impl SgmMatcher {
         s.ring.resize(slots * geo.width * geo.dpad, 0);
         s.ring_rows.resize(slots, usize::MAX);
         s.vsum.resize(geo.width * geo.dpad, 0);
-        s.hsum.resize(geo.dpad, 0);
+        s.raw.resize(geo.width * geo.dpad, 0);
         s.lbuf.resize(geo.width * geo.dpad);
         s.srow.resize(PICK_BLOCK * geo.dpad * 2);
         for (b, m) in s.vbuf.iter_mut().zip(s.vmin.iter_mut()) {
@@ -817,17 +817,20 @@ fn texture_mask(
     }
 }
 
-/// Computes the raw census costs of row `k` into its slot of the ring (unless it is there
-/// already) and returns the slot. Lanes of disparities a pixel cannot have, and the pixels
-/// left of `min_disp`, get [`CMAX`]: the block average then counts them as mismatches.
+/// Computes the block's horizontal sums of the raw census costs of row `k` into its slot of
+/// the ring (unless it is there already) and returns the slot. Lanes of disparities a pixel
+/// cannot have, and the pixels left of `min_disp`, get [`CMAX`]: the block average then
+/// counts them as mismatches.
 #[inline(always)]
-fn raw_row(s: &mut Scratch, k: usize, simd: bool) -> usize {
+fn raw_row(s: &mut Scratch, k: usize, block: usize, simd: bool) -> usize {
     let geo = s.geo;
     let slots = s.ring_rows.len();
     let slot = k % slots;
     if s.ring_rows[slot] != k {
         let (w, dpad) = (geo.width, geo.dpad);
-        let out = &mut s.ring[slot * w * dpad..(slot + 1) * w * dpad];
+        let ring = &mut s.ring[slot * w * dpad..(slot + 1) * w * dpad];
+        // With a 1-pixel block the raw costs are the sums: straight into the ring.
+        let out = if block == 1 { ring } else { &mut s.raw[..] };
         let cl = &s.census_l[k * w..(k + 1) * w];
         let cr = &s.census_r[k * w..(k + 1) * w];
         #[cfg(target_arch = "x86_64")]
@@ -845,22 +848,37 @@ fn raw_row(s: &mut Scratch, k: usize, simd: bool) -> usize {
             let _ = simd;
             scalar::raw_costs(&geo, cl, cr, out);
         }
+        if block > 1 {
+            let ring = &mut s.ring[slot * w * dpad..(slot + 1) * w * dpad];
+            row_sums(&s.raw, geo, block, ring);
+        }
         s.ring_rows[slot] = k;
     }
     slot
 }
 
-/// Adds (or subtracts) a row of raw costs to the column sums (wrapping: every sum is back
-/// in range once the window is complete).
+/// `out[x] = sum of raw[x - r ..= x + r]` lane by lane (columns clamped to the image), for
+/// `x >= dmin`, in wrapping u8 arithmetic: every sum is at most `block * CMAX <= 168`, so
+/// the running sum is exact once its window is complete.
 #[inline(always)]
-fn accumulate(vsum: &mut [u16], raw: &[u8], add: bool) {
-    if add {
-        for (v, &c) in vsum.iter_mut().zip(raw) {
-            *v = v.wrapping_add(c as u16);
+fn row_sums(raw: &[u8], geo: Geometry, block: usize, out: &mut [u8]) {
+    let (w, dpad, dmin) = (geo.width, geo.dpad, geo.dmin);
+    let r = (block / 2) as isize;
+    let col = |x: isize| &raw[(x.clamp(0, w as isize - 1) as usize) * dpad..][..dpad];
+    let mut acc = [0u8; 256];
+    let acc = &mut acc[..dpad];
+    for j in -r..=r {
+        for (a, &v) in acc.iter_mut().zip(col(dmin as isize + j)) {
+            *a = a.wrapping_add(v);
         }
-    } else {
-        for (v, &c) in vsum.iter_mut().zip(raw) {
-            *v = v.wrapping_sub(c as u16);
+    }
+    out[dmin * dpad..(dmin + 1) * dpad].copy_from_slice(acc);
+    for x in dmin + 1..w {
+        let (add, sub) = (col(x as isize + r), col(x as isize - 1 - r));
+        let o = &mut out[x * dpad..(x + 1) * dpad];
+        for (((a, &p), &m), o) in acc.iter_mut().zip(add).zip(sub).zip(o.iter_mut()) {
+            *a = a.wrapping_add(p).wrapping_sub(m);
+            *o = *a;
         }
     }
 }
@@ -868,8 +886,10 @@ fn accumulate(vsum: &mut [u16], raw: &[u8], add: bool) {
 /// Fills `s.cost` with the costs of row `y`: the census Hamming distances averaged over the
 /// `block x block` window (edge rows and columns repeated), scaled to `0..=COST_MAX`
 /// (twice the mean, so that half a bit of mean distance still counts), with 255 for the
-/// disparities a pixel cannot have. Rows are visited in sweep order (`down` = top-down) and
-/// the column sums are updated incrementally (`first`: start of a sweep).
+/// disparities a pixel cannot have. Rows are visited in sweep order (`down` = top-down);
+/// the ring holds each row's horizontal sums (u8, [`row_sums`]) and the column sums over
+/// the block's rows are updated incrementally (`first`: start of a sweep), in the same pass
+/// that scales them into `s.cost`. The sums are separable, so this is the 2D block sum.
 ///
 /// Why the average: the census of a single pixel flips bits under webcam noise and a
 /// vertical misalignment; averaging over 5x5 (OpenCV's SGBM sums its pixel costs over
@@ -878,69 +898,73 @@ fn accumulate(vsum: &mut [u16], raw: &[u8], add: bool) {
 /// and the clean one from 7.0 to 6.1 %.
 #[inline(always)]
 fn block_costs(s: &mut Scratch, block: usize, y: usize, down: bool, first: bool, simd: bool) {
-    let geo = s.geo;
-    let (w, h, dpad, dmin) = (geo.width, geo.height, geo.dpad, geo.dmin);
-    let len = w * dpad;
+    let h = s.geo.height;
     let r = (block / 2) as isize;
     let clamp = |k: isize| k.clamp(0, h as isize - 1) as usize;
     let y = y as isize;
     let dir: isize = if down { 1 } else { -1 };
-    if first {
-        s.ring_rows.fill(usize::MAX);
-        s.vsum.fill(0);
-        for j in -r..=r {
-            let slot = raw_row(s, clamp(y + j), simd);
-            accumulate(&mut s.vsum, &s.ring[slot * len..(slot + 1) * len], true);
-        }
-    } else {
-        // The row that leaves the window first (it is still in the ring), then the new one.
-        let slot = raw_row(s, clamp(y - dir - dir * r), simd);
-        accumulate(&mut s.vsum, &s.ring[slot * len..(slot + 1) * len], false);
-        let slot = raw_row(s, clamp(y + dir * r), simd);
-        accumulate(&mut s.vsum, &s.ring[slot * len..(slot + 1) * len], true);
-    }
-    // Horizontal running sum over the block, then the scaling.
     let n = (block * block) as u32;
     // floor(h * recip / 2^16) <= COST_MAX for every h <= CMAX * n (see the tests); both
     // factors fit 16 bits for n >= 3, so the product is one `pmulhuw`.
     let recip = (2 * 65536u32).div_ceil(n).min(u16::MAX as u32) as u16;
+    // The row to add and the row to take out of the column sums (none at the start of a
+    // sweep, whose first rows are added one by one: the same kernel keeps the sums in the
+    // lane order it uses).
+    let (add_slot, sub_slot) = if first {
+        s.ring_rows.fill(usize::MAX);
+        s.vsum.fill(0);
+        for j in -r..r {
+            let slot = raw_row(s, clamp(y + j), block, simd);
+            add_row(s, slot, None, recip, block, simd);
+        }
+        (raw_row(s, clamp(y + r), block, simd), None)
+    } else {
+        // The row that leaves the window (it is still in the ring), then the new one.
+        let sub = raw_row(s, clamp(y - dir - dir * r), block, simd);
+        (raw_row(s, clamp(y + dir * r), block, simd), Some(sub))
+    };
+    add_row(s, add_slot, sub_slot, recip, block, simd);
+}
+
+/// Adds ring slot `add` to the column sums and takes slot `sub` out, and writes the scaled
+/// sums to `s.cost` (255 in the padding lanes and the disparities past the right image's
+/// edge), for the pixels `x >= dmin`.
+#[inline(always)]
+fn add_row(
+    s: &mut Scratch,
+    add_slot: usize,
+    sub_slot: Option<usize>,
+    recip: u16,
+    block: usize,
+    simd: bool,
+) {
+    let geo = s.geo;
+    let (w, dpad, dmin) = (geo.width, geo.dpad, geo.dmin);
+    let len = w * dpad;
     // 255 in the padding lanes (>= nd), which no pixel has.
     let mut pad_mask = [0u8; 256];
     pad_mask[geo.nd..dpad].fill(INVALID_COST);
     let pad_mask = &pad_mask[..dpad];
-    let vsum = &s.vsum;
-    let col = |x: isize| &vsum[(x.clamp(0, w as isize - 1) as usize) * dpad..][..dpad];
-    let hsum = &mut s.hsum[..dpad];
-    hsum.fill(0);
-    for j in -r..=r {
-        for (a, &v) in hsum.iter_mut().zip(col(dmin as isize + j)) {
-            *a += v;
-        }
-    }
+    let add = &s.ring[add_slot * len..(add_slot + 1) * len];
+    let zeros = [0u8; 256];
     let cost = s.cost.data_mut();
     for x in dmin..w {
-        if x > dmin {
-            let (add, sub) = (col(x as isize + r), col(x as isize - 1 - r));
-            for ((a, &p), &m) in hsum.iter_mut().zip(add).zip(sub) {
-                *a = a.wrapping_add(p).wrapping_sub(m);
-            }
-        }
-        let out = &mut cost[x * dpad..(x + 1) * dpad];
-        if block == 1 {
-            for ((o, &a), &m) in out.iter_mut().zip(hsum.iter()).zip(pad_mask) {
-                *o = (2 * a) as u8 | m;
-            }
+        let span = x * dpad..(x + 1) * dpad;
+        let sub = match sub_slot {
+            Some(k) => &s.ring[k * len..(k + 1) * len][span.clone()],
+            None => &zeros[..dpad],
+        };
+        let vsum = &mut s.vsum[span.clone()];
+        let out = &mut cost[span.clone()];
+        #[cfg(target_arch = "x86_64")]
+        if simd {
+            // SAFETY: `simd` is only true when AVX2 was detected (`with_simd`, `new`).
+            unsafe { avx2::update_and_scale(vsum, &add[span], sub, recip, block, pad_mask, out) };
         } else {
-            #[cfg(target_arch = "x86_64")]
-            if simd {
-                // SAFETY: `simd` is only true when AVX2 was detected (`with_simd`, `new`).
-                unsafe { avx2::scale_costs(hsum, recip, pad_mask, out) };
-            } else {
-                scale_costs(hsum, recip, pad_mask, out);
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            scale_costs(hsum, recip, pad_mask, out);
+            update_and_scale(vsum, &add[span], sub, recip, block, pad_mask, out);
         }
+        #[cfg(not(target_arch = "x86_64"))]
+        update_and_scale(vsum, &add[span], sub, recip, block, pad_mask, out);
         let nvalid = geo.nvalid(x);
         if nvalid < geo.nd {
             // Left band: disparities past the right image's edge.
@@ -949,11 +973,26 @@ fn block_costs(s: &mut Scratch, block: usize, y: usize, down: bool, first: bool,
     }
 }
 
-/// `out = (sum * recip) >> 16 | pad_mask`, lane by lane (the AVX2 twin is one `pmulhuw`).
+/// `sum += add - sub`, then `out = (sum * recip) >> 16 | pad_mask` (`2 * sum` for a
+/// 1-pixel block), lane by lane (the AVX2 twin widens and uses one `pmulhuw`).
 #[inline(always)]
-fn scale_costs(sum: &[u16], recip: u16, pad_mask: &[u8], out: &mut [u8]) {
-    for ((o, &a), &m) in out.iter_mut().zip(sum).zip(pad_mask) {
-        *o = ((a as u32 * recip as u32) >> 16) as u8 | m;
+fn update_and_scale(
+    sum: &mut [u16],
+    add: &[u8],
+    sub: &[u8],
+    recip: u16,
+    block: usize,
+    pad_mask: &[u8],
+    out: &mut [u8],
+) {
+    for ((((v, &a), &m), &p), o) in sum.iter_mut().zip(add).zip(sub).zip(pad_mask).zip(out) {
+        *v = v.wrapping_add(a as u16).wrapping_sub(m as u16);
+        let c = if block == 1 {
+            2 * *v as u32
+        } else {
+            (*v as u32 * recip as u32) >> 16
+        };
+        *o = c as u8 | p;
     }
 }
 
@@ -1820,24 +1859,44 @@ mod avx2 {
         }
     }
 
-    /// `scale_costs` with `pmulhuw`: `dpad` lanes, a multiple of 32.
+    /// `update_and_scale` with `pmulhuw`: `dpad` lanes, a multiple of 32.
     ///
     /// # Safety
     /// The CPU must have AVX2.
     #[target_feature(enable = "avx2")]
     #[inline]
-    pub(super) unsafe fn scale_costs(sum: &[u16], recip: u16, pad_mask: &[u8], out: &mut [u8]) {
+    pub(super) unsafe fn update_and_scale(
+        sum: &mut [u16],
+        add: &[u8],
+        sub: &[u8],
+        recip: u16,
+        block: usize,
+        pad_mask: &[u8],
+        out: &mut [u8],
+    ) {
         let n = out.len();
         assert!(n.is_multiple_of(LANES) && sum.len() >= n && pad_mask.len() >= n);
+        assert!(add.len() >= n && sub.len() >= n);
         let r = _mm256_set1_epi16(recip as i16);
+        let sp = sum.as_mut_ptr().cast::<u8>();
         for i in (0..n).step_by(LANES) {
-            // SAFETY: i + 32 <= n, within every slice (asserted); unaligned loads and stores.
+            // SAFETY: i + 32 <= n, within every slice (asserted; `sum` holds 2n bytes);
+            // unaligned loads and stores.
             unsafe {
-                let a = _mm256_loadu_si256(sum.as_ptr().add(i).cast());
-                let b = _mm256_loadu_si256(sum.as_ptr().add(i + 16).cast());
-                // Every product is at most COST_MAX after the shift: no saturation in the pack.
-                let q = _mm256_packus_epi16(_mm256_mulhi_epu16(a, r), _mm256_mulhi_epu16(b, r));
-                let q = _mm256_permute4x64_epi64::<0b11_01_10_00>(q);
+                let (a0, a1) = widen(ld(add.as_ptr().add(i)));
+                let (m0, m1) = widen(ld(sub.as_ptr().add(i)));
+                let v0 = _mm256_sub_epi16(_mm256_add_epi16(ld(sp.add(2 * i)), a0), m0);
+                let v1 = _mm256_sub_epi16(_mm256_add_epi16(ld(sp.add(2 * i + 32)), a1), m1);
+                st(sp.add(2 * i), v0);
+                st(sp.add(2 * i + 32), v1);
+                let (q0, q1) = if block == 1 {
+                    (_mm256_add_epi16(v0, v0), _mm256_add_epi16(v1, v1))
+                } else {
+                    (_mm256_mulhi_epu16(v0, r), _mm256_mulhi_epu16(v1, r))
+                };
+                // Every cost is at most COST_MAX: no saturation in the pack, which puts the
+                // lanes `widen` interleaved back in order (the sums stay interleaved).
+                let q = _mm256_packus_epi16(q0, q1);
                 let m = ld(pad_mask.as_ptr().add(i));
                 st(out.as_mut_ptr().add(i), _mm256_or_si256(q, m));
             }
