@@ -1009,8 +1009,11 @@ fn snapshot_disparity<T: DisparityPayload>(
     })
 }
 
-/// Left images kept while waiting for the disparity map of the same frame.
+/// Left images kept at first while waiting for the disparity map of the same frame.
 const KEPT_LEFT_IMAGES: usize = 8;
+/// At most this many: a map older than every kept image doubles the count (on a loaded
+/// machine the 640x480 maps trail the frames by more than 8 frames).
+const MAX_KEPT_LEFT_IMAGES: usize = 256;
 
 fn snapshot_fused<D: DisparityPayload, F: PairPayload>(
     probe: &Probe,
@@ -1030,9 +1033,10 @@ fn snapshot_fused<D: DisparityPayload, F: PairPayload>(
     let deadline = Instant::now() + opts.timeout;
     // Copies of recent left images (the frames themselves are released at once).
     let mut lefts: VecDeque<(u64, Vec<u8>)> = VecDeque::new();
+    let mut kept = KEPT_LEFT_IMAGES;
     while Instant::now() < deadline {
         while let Some(f) = frame_sub.receive().map_err(receive_error(frames.path))? {
-            if lefts.len() == KEPT_LEFT_IMAGES {
+            while lefts.len() >= kept {
                 lefts.pop_front();
             }
             lefts.push_back((f.payload().frame_id(), f.payload().left().to_vec()));
@@ -1041,6 +1045,10 @@ fn snapshot_fused<D: DisparityPayload, F: PairPayload>(
             let d = d.payload();
             let id = d.header().frame_id;
             let Some((_, left)) = lefts.iter().find(|(fid, _)| *fid == id) else {
+                if lefts.front().is_some_and(|(oldest, _)| id < *oldest) {
+                    // The map trails the frames by more than the kept images: keep more.
+                    kept = (kept * 2).min(MAX_KEPT_LEFT_IMAGES);
+                }
                 continue;
             };
             if F::SIZE != D::SIZE {
