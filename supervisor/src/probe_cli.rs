@@ -35,8 +35,8 @@ pub enum ProbeCommand {
         /// Stop after this many once-a-second reports.
         #[arg(long, value_name = "N")]
         count: Option<u64>,
-        /// Stop after this many seconds.
-        #[arg(long, value_name = "SECONDS")]
+        /// Stop after this many seconds (`--duration` means seconds in every command).
+        #[arg(long = "duration", alias = "duration-s", value_name = "SECONDS")]
         duration_s: Option<f64>,
         /// Print JSON lines.
         #[arg(long)]
@@ -91,7 +91,7 @@ pub enum ProbeCommand {
         refresh_s: f64,
     },
     /// Record topics into an MCAP file (Foxglove/Lichtblick open it: images as
-    /// foxglove.RawImage) until Ctrl-C or --duration-s; lost samples are counted in the file's
+    /// foxglove.RawImage) until Ctrl-C or --duration; lost samples are counted in the file's
     /// metadata and printed at the end; a full disk ends it with a readable file.
     Record {
         #[command(flatten)]
@@ -103,8 +103,8 @@ pub enum ProbeCommand {
         /// actuator/sent).
         #[arg(long, num_args = 1.., value_name = "TOPIC")]
         topics: Vec<String>,
-        /// Stop after this many seconds.
-        #[arg(long, value_name = "SECONDS")]
+        /// Stop after this many seconds (`--duration` means seconds in every command).
+        #[arg(long = "duration", alias = "duration-s", value_name = "SECONDS")]
         duration_s: Option<f64>,
         /// Print the summary as JSON.
         #[arg(long)]
@@ -158,7 +158,7 @@ pub fn run(command: ProbeCommand) -> anyhow::Result<()> {
         } => {
             let opts = HzOptions {
                 count,
-                duration: duration_s.map(|d| seconds(d, "--duration-s")).transpose()?,
+                duration: duration_s.map(|d| seconds(d, "--duration")).transpose()?,
                 report_period: std::time::Duration::from_secs(1),
                 json,
             };
@@ -232,7 +232,7 @@ pub fn run(command: ProbeCommand) -> anyhow::Result<()> {
             let opts = RecordOptions {
                 out: file,
                 topics,
-                duration: duration_s.map(|d| seconds(d, "--duration-s")).transpose()?,
+                duration: duration_s.map(|d| seconds(d, "--duration")).transpose()?,
                 create_topics,
                 ready_file,
             };

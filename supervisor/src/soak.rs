@@ -151,7 +151,7 @@ pub fn run(opts: &SoakOptions) -> anyhow::Result<()> {
     let (mut echo, sent, watchdog) = watch_actuator(&exe, &instance)?;
     let probe_kinds: [&[&str]; 3] = [
         &["probe", "echo", "decisions", "--count", "5", "--json"],
-        &["probe", "hz", "ranges", "--duration-s", "1"],
+        &["probe", "hz", "ranges", "--duration", "1"],
         &["probe", "list"],
     ];
     for kind in probe_kinds {

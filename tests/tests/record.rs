@@ -55,7 +55,7 @@ fn a_recording_holds_every_topic_and_its_counts() {
         &p.instance,
         "--out",
         file.to_str().expect("utf-8 path"),
-        "--duration-s",
+        "--duration",
         "3",
         "--json",
     ]);
@@ -110,7 +110,7 @@ fn a_full_disk_ends_the_recording_with_a_readable_file() {
     let kept = keep.path().join("run.mcap");
     let script = format!(
         "mount -t tmpfs -o size=24m tmpfs {mount} && \
-         {hvs} probe record --instance {instance} --out {mount}/run.mcap --duration-s 20 --json \
+         {hvs} probe record --instance {instance} --out {mount}/run.mcap --duration 20 --json \
          && cp {mount}/run.mcap {kept}",
         hvs = bin("hvs").display(),
         instance = p.instance,
