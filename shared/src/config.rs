@@ -34,12 +34,14 @@ pub enum ConfigError {
         message: String,
     },
     /// A value is out of range or inconsistent with another.
-    #[error("config file {path}: `{key}` {message}")]
+    #[error("config file {path}{}: `{key}` {message}", line_suffix(*.line))]
     Invalid {
         /// The file.
         path: PathBuf,
         /// Dotted key at fault, e.g. `stereo.lo.max_disp`.
         key: String,
+        /// The line (1-based) that sets the key, when the file sets it (a default has none).
+        line: Option<usize>,
         /// What is wrong with it.
         message: String,
     },
@@ -992,7 +994,8 @@ pub struct StageOverride {
     /// defaults to 10 so that it only uses what the fast path leaves.
     pub nice: Option<i32>,
     /// A stage silent this long is declared hung and restarted, ms (default
-    /// `supervisor.heartbeat_timeout_ms`). The actuator's should be short: while it hangs the
+    /// `supervisor.heartbeat_timeout_ms`, and at least [`NICED_HEARTBEAT_TIMEOUT_MS`] for a
+    /// stage with a positive `nice`). The actuator's should be short: while it hangs the
     /// servo controller holds the last pulses.
     pub heartbeat_timeout_ms: Option<u64>,
 }
@@ -1023,6 +1026,13 @@ pub struct StageSpec {
     /// Hang bound, ms.
     pub heartbeat_timeout_ms: u64,
 }
+
+/// The default hang bound of a stage with a positive niceness (the 640x480 worker), ms. On
+/// a machine whose cores other programs keep busy, a niced stage gets a small share of them
+/// (nice 10 weighs about a tenth of nice 0) and one 640x480 frame can take over a second of
+/// wall time: with the general 1 s bound it was restarted as hung while it was working. It
+/// feeds nothing the robot waits for (fusion ages its results out after `hi_max_age_ms`).
+pub const NICED_HEARTBEAT_TIMEOUT_MS: u64 = 5000;
 
 /// The binary that runs a stage by default.
 pub fn default_program(stage: &str) -> &'static str {
@@ -1057,10 +1067,16 @@ impl HvsConfig {
         Ok(config)
     }
 
-    fn invalid(&self, key: &str, message: impl Into<String>) -> ConfigError {
+    /// The error for `key` (dotted, from the top of the file), with the line of the file
+    /// that sets it.
+    pub fn invalid(&self, key: &str, message: impl Into<String>) -> ConfigError {
+        let line = std::fs::read_to_string(&self.source_path)
+            .ok()
+            .and_then(|text| key_line(&text, key));
         ConfigError::Invalid {
             path: self.source_path.clone(),
             key: key.into(),
+            line,
             message: message.into(),
         }
     }
@@ -1109,104 +1125,8 @@ impl HvsConfig {
                 format!("= {} must be in [-2, 2] metres", c.forward_m),
             ));
         }
-        for (key, cfg, width) in [
-            ("stereo.lo", &self.stereo.lo, 320),
-            ("stereo.hi", &self.stereo.hi, 640),
-        ] {
-            if cfg.fill_invalid_px > 256 {
-                return Err(self.invalid(
-                    &format!("{key}.fill_invalid_px"),
-                    format!("= {} must be in 0..=256 px", cfg.fill_invalid_px),
-                ));
-            }
-            if let Err((sub, message)) = cfg.row_align.validate() {
-                return Err(self.invalid(&format!("{key}.{sub}"), message));
-            }
-            if cfg.max_disp <= cfg.min_disp {
-                return Err(self.invalid(
-                    &format!("{key}.max_disp"),
-                    format!(
-                        "= {} must be above min_disp = {}",
-                        cfg.max_disp, cfg.min_disp
-                    ),
-                ));
-            }
-            if cfg.max_disp as usize >= width / 2 {
-                return Err(self.invalid(
-                    &format!("{key}.max_disp"),
-                    format!(
-                        "= {} leaves too little image at width {width}",
-                        cfg.max_disp
-                    ),
-                ));
-            }
-            if cfg.window.is_multiple_of(2) || !(3..=31).contains(&cfg.window) {
-                return Err(self.invalid(
-                    &format!("{key}.window"),
-                    format!("= {} must be odd and in 3..=31", cfg.window),
-                ));
-            }
-            if cfg.max_disp - cfg.min_disp + 1 > 256 {
-                return Err(self.invalid(
-                    &format!("{key}.max_disp"),
-                    format!(
-                        "searches {} disparities; at most 256 are supported",
-                        cfg.max_disp - cfg.min_disp + 1
-                    ),
-                ));
-            }
-            if cfg.uniqueness_pct > 100 {
-                return Err(self.invalid(
-                    &format!("{key}.uniqueness_pct"),
-                    format!("= {} must be in 0..=100", cfg.uniqueness_pct),
-                ));
-            }
-            let (cw, ch) = (cfg.bm.census_width, cfg.bm.census_height);
-            if cw.is_multiple_of(2) || ch.is_multiple_of(2) || cw * ch > 33 || cw * ch < 9 {
-                return Err(self.invalid(
-                    &format!("{key}.bm.census_width"),
-                    format!("census window {cw}x{ch} must be odd x odd with 9..=33 pixels"),
-                ));
-            }
-            if !matches!(cfg.sgm.paths, 4 | 5 | 8) {
-                return Err(self.invalid(
-                    &format!("{key}.sgm.paths"),
-                    format!("= {} must be 4, 5 or 8", cfg.sgm.paths),
-                ));
-            }
-            if cfg.sgm.p1 == 0 || cfg.sgm.p2 <= cfg.sgm.p1 || cfg.sgm.p2 > 79 {
-                return Err(self.invalid(
-                    &format!("{key}.sgm.p2"),
-                    format!(
-                        "penalties p1 = {}, p2 = {} need 0 < p1 < p2 <= 79",
-                        cfg.sgm.p1, cfg.sgm.p2
-                    ),
-                ));
-            }
-            if !(0.0..=64.0).contains(&cfg.sgm.texture_threshold) || cfg.sgm.texture_radius > 15 {
-                return Err(self.invalid(
-                    &format!("{key}.sgm.texture_threshold"),
-                    format!(
-                        "texture_threshold = {} (0..=64) or texture_radius = {} (at most 15) out of range",
-                        cfg.sgm.texture_threshold, cfg.sgm.texture_radius
-                    ),
-                ));
-            }
-            if !matches!(cfg.sgm.block, 1 | 3 | 5 | 7) {
-                return Err(self.invalid(
-                    &format!("{key}.sgm.block"),
-                    format!("= {} must be 1, 3, 5 or 7", cfg.sgm.block),
-                ));
-            }
-            if cfg.ogale.stretch.is_empty()
-                || cfg.ogale.stretch.iter().any(|m| !(0.25..=4.0).contains(m))
-            {
-                return Err(self.invalid(
-                    &format!("{key}.ogale.stretch"),
-                    "needs at least one factor, each in 0.25..=4.0",
-                ));
-            }
-        }
+        // The `[stereo.*]` sections are checked by the matchers' own rules
+        // (`hvs_stereo::validate_section`, run by `hvs check`, `hvs run` and `hvs doctor`).
         let f = &self.fusion;
         if f.windows != 3 && f.windows != 5 {
             return Err(self.invalid("fusion.windows", format!("= {} must be 3 or 5", f.windows)));
@@ -1660,6 +1580,7 @@ impl HvsConfig {
             .iter()
             .map(|&name| {
                 let o = self.stages.get(name).cloned().unwrap_or_default();
+                let nice = o.nice.unwrap_or(if name == "stereo-hi" { 10 } else { 0 });
                 StageSpec {
                     name: name.to_string(),
                     program: o
@@ -1672,10 +1593,14 @@ impl HvsConfig {
                     max_backoff_ms: o.max_backoff_ms.unwrap_or(5000),
                     max_restarts: o.max_restarts.unwrap_or(10),
                     restart_window_s: o.restart_window_s.unwrap_or(60),
-                    nice: o.nice.unwrap_or(if name == "stereo-hi" { 10 } else { 0 }),
-                    heartbeat_timeout_ms: o
-                        .heartbeat_timeout_ms
-                        .unwrap_or(self.supervisor.heartbeat_timeout_ms),
+                    nice,
+                    heartbeat_timeout_ms: o.heartbeat_timeout_ms.unwrap_or(if nice > 0 {
+                        self.supervisor
+                            .heartbeat_timeout_ms
+                            .max(NICED_HEARTBEAT_TIMEOUT_MS)
+                    } else {
+                        self.supervisor.heartbeat_timeout_ms
+                    }),
                 }
             })
             .collect()
@@ -1689,6 +1614,39 @@ impl HvsConfig {
             _ => None,
         }
     }
+}
+
+/// `":N"` for line `N`, nothing without one.
+fn line_suffix(line: Option<usize>) -> String {
+    line.map(|n| format!(":{n}")).unwrap_or_default()
+}
+
+/// The line (1-based) of `text` that sets the dotted `key` (`stereo.lo.sgm.p2`): under its
+/// table header (`[stereo.lo.sgm]`) or as a dotted key under a parent table (`sgm.p2 = ...`
+/// under `[stereo.lo]`). A plain line scan, not a TOML parser: it is used only to point at
+/// a key in an error message, after the file has parsed, and gives `None` when unsure.
+pub fn key_line(text: &str, key: &str) -> Option<usize> {
+    let mut table = String::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        if let Some(header) = line.strip_prefix('[') {
+            table = header.trim_end_matches(']').trim().replace(' ', "");
+            continue;
+        }
+        let Some((name, _)) = line.split_once('=') else {
+            continue;
+        };
+        let name = name.trim().replace(' ', "");
+        let full = if table.is_empty() {
+            name
+        } else {
+            format!("{table}.{name}")
+        };
+        if full == key {
+            return Some(i + 1);
+        }
+    }
+    None
 }
 
 /// Checks an instance name: `[A-Za-z0-9_-]`, 1 to 32 characters.
@@ -1760,11 +1718,15 @@ mod tests {
     }
 
     #[test]
-    fn max_disp_not_above_min_disp_is_rejected() {
-        let err = parse("[stereo.hi]\nmin_disp = 40\nmax_disp = 40\n")
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("stereo.hi.max_disp"), "{err}");
+    fn key_line_finds_keys_under_headers_and_dotted() {
+        let text = "instance = \"x\"\n[stereo.lo]\nmin_disp = 2 # near\nsgm.p2 = 64\n\n[ stereo.lo.sgm ]\np1 = 16\n[fusion]\nwindows=3\n";
+        assert_eq!(key_line(text, "instance"), Some(1));
+        assert_eq!(key_line(text, "stereo.lo.min_disp"), Some(3));
+        assert_eq!(key_line(text, "stereo.lo.sgm.p2"), Some(4));
+        assert_eq!(key_line(text, "stereo.lo.sgm.p1"), Some(7));
+        assert_eq!(key_line(text, "fusion.windows"), Some(9));
+        assert_eq!(key_line(text, "stereo.hi.min_disp"), None);
+        assert_eq!(key_line(text, "min_disp"), None);
     }
 
     #[test]

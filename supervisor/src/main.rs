@@ -60,6 +60,15 @@ enum Command {
         #[arg(long, value_name = "FILE.mcap")]
         record: Option<PathBuf>,
     },
+    /// Check a config without starting anything: the schema, every section's ranges, the
+    /// stage graph (a frame source, every enabled stage's inputs published), the stereo
+    /// matchers' parameters and the simulator's map. Exit 0 when it is good, 1 otherwise,
+    /// with the file, key and line at fault.
+    Check {
+        /// Pipeline configuration (default: config/sim.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+    },
     /// Check what a robot needs before `hvs run`: the config, the cameras (stable names,
     /// formats, both streaming together), the serial device and the servo controller,
     /// /dev/shm space, leftovers of a dead run. One line per check with what to do about
@@ -378,9 +387,30 @@ fn default_config() -> anyhow::Result<PathBuf> {
     )
 }
 
-/// Checks that go beyond the config schema before anything is started: the simulator's map
-/// must parse (its errors name file, line and column).
+/// Checks that go beyond the config schema before anything is started: each stereo section
+/// by its matchers' own rules, and the simulator's map must parse (its errors name file,
+/// line and column).
 pub fn preflight(config: &HvsConfig) -> anyhow::Result<()> {
+    for (section, stereo, width_px) in [
+        ("stereo.lo", &config.stereo.lo, 320),
+        ("stereo.hi", &config.stereo.hi, 640),
+    ] {
+        match hvs_stereo::validate_section(stereo, width_px) {
+            Ok(()) => {}
+            Err(hvs_stereo::StereoError::BadParameter { key, message }) => {
+                return Err(config.invalid(&format!("{section}.{key}"), message).into());
+            }
+            Err(hvs_stereo::StereoError::BadRange { min, max }) => {
+                return Err(config
+                    .invalid(
+                        &format!("{section}.max_disp"),
+                        format!("= {max} must be above min_disp = {min}"),
+                    )
+                    .into());
+            }
+            Err(e) => return Err(config.invalid(section, e.to_string()).into()),
+        }
+    }
     if config.stage_enabled("sim") {
         let map = config.resolve_path(&config.sim.map);
         hvs_sim::GridMap::load(&map)
@@ -460,6 +490,13 @@ fn main() -> ExitCode {
                 record,
             })
             .map(|_| ())
+        })(),
+        Command::Check { config } => (|| {
+            let path = resolve_config(config)?;
+            let config = HvsConfig::load(&path)?;
+            preflight(&config)?;
+            println!("config {}: ok", path.display());
+            Ok(())
         })(),
         Command::Doctor { config } => match resolve_config(config) {
             Ok(path) => {

@@ -91,3 +91,57 @@ fn the_servo_controller_is_found_answering_or_named_silent() {
         "{text}"
     );
 }
+
+/// `hvs check --config F`: exit status and output.
+fn check(config: &std::path::Path) -> (i32, String) {
+    let out = hvs(&["check", "--config", &config.display().to_string()]);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    println!("$ hvs check --config {}\n{text}", config.display());
+    (out.status.code().unwrap_or(-1), text)
+}
+
+#[test]
+fn hvs_check_passes_the_shipped_configs_and_names_file_key_and_line() {
+    for shipped in ["config/sim.toml", "config/minoru.toml"] {
+        let (code, text) = check(&repo_root().join(shipped));
+        assert_eq!(code, 0, "{text}");
+        assert!(text.contains(": ok"), "{text}");
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    // The matchers' rule (uniqueness below 100 %), which the config once accepted.
+    let path = write_config(
+        dir.path(),
+        "uniq.toml",
+        &[("uniqueness_pct = 5", "uniqueness_pct = 100")],
+        "",
+    );
+    let line = std::fs::read_to_string(&path)
+        .expect("read")
+        .lines()
+        .position(|l| l.starts_with("uniqueness_pct = 100"))
+        .expect("the edited line")
+        + 1;
+    let (code, text) = check(&path);
+    assert_eq!(code, 1, "{text}");
+    let want = format!(
+        "{}:{line}: `stereo.lo.uniqueness_pct` = 100 must be below 100",
+        path.display()
+    );
+    assert!(text.contains(&want), "no {want:?} in\n{text}");
+    // A penalty above the byte-sized path costs (sgm's MAX_P2), in a section of its own.
+    let path = write_config(dir.path(), "p2.toml", &[], "[stereo.hi.sgm]\np2 = 90\n");
+    let (code, text) = check(&path);
+    assert_eq!(code, 1, "{text}");
+    assert!(
+        text.contains("`stereo.hi.sgm.p2`") && text.contains("<= 79"),
+        "{text}"
+    );
+    // The doctor runs the same checks.
+    let (code, text) = doctor(&path);
+    assert_eq!(code, 1, "{text}");
+    assert!(text.contains("`stereo.hi.sgm.p2`"), "{text}");
+}

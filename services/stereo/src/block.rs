@@ -94,7 +94,8 @@ use crate::census::census;
 use crate::equalize::equalize_right;
 use crate::post::{lr_check, parabola_offset, speckle_filter, to_q8};
 use crate::{
-    ImageView, MatchStats, StereoError, StereoMatcher, check_fits, check_pair, check_range,
+    ImageView, MatchStats, StereoError, StereoMatcher, bad_parameter, check_fits, check_pair,
+    check_range, check_uniqueness,
 };
 
 /// Largest searchable disparity: a map in 1/256 px (`u16`) holds `255 * 256` but not
@@ -141,9 +142,10 @@ impl BlockCost {
                 height: config.bm.census_height,
             },
             other => {
-                return Err(StereoError::BadParameter(format!(
-                    "{other:?} is not a block-matching algorithm"
-                )));
+                return bad_parameter(
+                    "algorithm",
+                    format!("{other:?} is not a block-matching algorithm"),
+                );
             }
         })
     }
@@ -300,40 +302,38 @@ impl BlockParams {
     /// Checks the parameters on their own (the image size is checked per call).
     pub fn validate(&self) -> Result<(), StereoError> {
         check_range(self.min_disp, self.max_disp)?;
-        let bad = |m: String| Err(StereoError::BadParameter(m));
         if self.max_disp > MAX_DISPARITY {
-            return bad(format!(
-                "max disparity {} is above {MAX_DISPARITY}",
-                self.max_disp
-            ));
+            return bad_parameter(
+                "max_disp",
+                format!("= {} is above {MAX_DISPARITY}", self.max_disp),
+            );
         }
         if self.window.is_multiple_of(2) || !(3..=31).contains(&self.window) {
-            return bad(format!("window {} must be odd and in 3..=31", self.window));
+            return bad_parameter(
+                "window",
+                format!("= {} must be odd and in 3..=31", self.window),
+            );
         }
         if self.texture_threshold > 255 {
-            return bad(format!(
-                "texture threshold {} is above 255 grey levels",
-                self.texture_threshold
-            ));
+            return bad_parameter(
+                "bm.texture_threshold",
+                format!("= {} is above 255 grey levels", self.texture_threshold),
+            );
         }
-        if self.uniqueness_pct >= 100 {
-            return bad(format!(
-                "uniqueness {} % must be below 100",
-                self.uniqueness_pct
-            ));
-        }
+        check_uniqueness(self.uniqueness_pct)?;
         if let BlockCost::Census { width, height } = self.cost
             && (width.is_multiple_of(2)
                 || height.is_multiple_of(2)
                 || width * height > 33
                 || width * height < 3)
         {
-            return bad(format!(
-                "census window {width}x{height} must be odd by odd with 3..=33 pixels"
-            ));
+            return bad_parameter(
+                "bm.census_width",
+                format!("census window {width}x{height} must be odd by odd with 3..=33 pixels"),
+            );
         }
         if !(1..=64).contains(&self.threads) {
-            return bad(format!("threads {} must be in 1..=64", self.threads));
+            return bad_parameter("threads", format!("= {} must be in 1..=64", self.threads));
         }
         Ok(())
     }
@@ -1849,7 +1849,7 @@ mod tests {
         };
         assert!(matches!(
             BlockMatcher::from_config(&sgm),
-            Err(StereoError::BadParameter(_))
+            Err(StereoError::BadParameter { .. })
         ));
     }
 
@@ -1900,7 +1900,10 @@ mod tests {
                 }
             }),
         ] {
-            assert!(matches!(bad, Err(StereoError::BadParameter(_))), "{bad:?}");
+            assert!(
+                matches!(bad, Err(StereoError::BadParameter { .. })),
+                "{bad:?}"
+            );
         }
         // Images of different sizes.
         let mut m = BlockMatcher::new(BlockParams::default()).expect("params");

@@ -110,9 +110,22 @@ pub enum StereoError {
         /// Window size.
         window: u32,
     },
+    /// The image is wider than the algorithm handles.
+    #[error("image width {width} px is above the {max_width} px this algorithm handles")]
+    ImageTooWide {
+        /// Width.
+        width: usize,
+        /// The most handled.
+        max_width: usize,
+    },
     /// A parameter is out of its range.
-    #[error("{0}")]
-    BadParameter(String),
+    #[error("`{key}` {message}")]
+    BadParameter {
+        /// The key in a `[stereo.*]` config section, e.g. `sgm.p2` or `uniqueness_pct`.
+        key: &'static str,
+        /// What is wrong with it.
+        message: String,
+    },
 }
 
 /// Statistics of one computed map.
@@ -207,6 +220,61 @@ pub fn check_range(min_disp: u32, max_disp: u32) -> Result<(), StereoError> {
             max: max_disp,
         });
     }
+    Ok(())
+}
+
+/// A [`StereoError::BadParameter`] for `key`.
+pub(crate) fn bad_parameter<T>(
+    key: &'static str,
+    message: impl Into<String>,
+) -> Result<T, StereoError> {
+    Err(StereoError::BadParameter {
+        key,
+        message: message.into(),
+    })
+}
+
+/// The uniqueness margin's rule, one for every matcher: a winner must beat the runner-up
+/// by `pct` %, and 100 % or more would reject every pixel.
+pub fn check_uniqueness(pct: u32) -> Result<(), StereoError> {
+    if pct >= 100 {
+        return bad_parameter("uniqueness_pct", format!("= {pct} must be below 100"));
+    }
+    Ok(())
+}
+
+/// Checks a whole `[stereo.*]` section for images `width_px` wide, by the rules of the code
+/// that uses each value: the disparity range, the row alignment, the gap fill and the
+/// parameters of every matcher family (not only the chosen one: a typo in an unused
+/// subsection is still an error). `hvs check`, `hvs run` and `hvs doctor` run it before
+/// anything starts; [`matcher_for`] runs the chosen matcher's part again.
+pub fn validate_section(config: &StereoConfig, width_px: usize) -> Result<(), StereoError> {
+    check_range(config.min_disp, config.max_disp)?;
+    if config.max_disp as usize >= width_px / 2 {
+        return bad_parameter(
+            "max_disp",
+            format!(
+                "= {} leaves too little image at width {width_px}",
+                config.max_disp
+            ),
+        );
+    }
+    if config.fill_invalid_px > 256 {
+        return bad_parameter(
+            "fill_invalid_px",
+            format!("= {} must be in 0..=256 px", config.fill_invalid_px),
+        );
+    }
+    if let Err((key, message)) = config.row_align.validate() {
+        return bad_parameter(key, message);
+    }
+    sgm::SgmParams::from_config(config).validate()?;
+    let census = StereoConfig {
+        algorithm: StereoAlgorithm::BmCensus,
+        ..config.clone()
+    };
+    block::BlockParams::from_config(&census)?.validate()?;
+    ogale::OgaleParams::from_config(config).validate()?;
     Ok(())
 }
 

@@ -26,7 +26,8 @@ use hvs_shared::messages::StereoAlgorithm;
 use crate::equalize::equalize_right;
 use crate::post::{lr_check, median3x3, parabola_offset, speckle_filter};
 use crate::{
-    ImageView, MatchStats, StereoError, StereoMatcher, check_fits, check_pair, check_range,
+    ImageView, MatchStats, StereoError, StereoMatcher, bad_parameter, check_fits, check_pair,
+    check_range, check_uniqueness,
 };
 
 /// Which reading of Ogale & Aloimonos to run.
@@ -232,45 +233,49 @@ impl OgaleParams {
     /// Checks the parameters on their own (image size is checked per call).
     pub fn validate(&self) -> Result<(), StereoError> {
         check_range(self.min_disp, self.max_disp)?;
-        let bad = |msg: String| Err(StereoError::BadParameter(msg));
         if self.max_disp > MAX_DISP_PX {
-            return bad(format!(
-                "max disparity {} is above {MAX_DISP_PX} px, the most a 1/256-px map holds",
-                self.max_disp
-            ));
+            return bad_parameter(
+                "max_disp",
+                format!(
+                    "= {} is above {MAX_DISP_PX} px, the most a 1/256-px map holds",
+                    self.max_disp
+                ),
+            );
         }
         if self.match_threshold > 255 {
-            return bad(format!(
-                "ogale match_threshold {} must be at most 255",
-                self.match_threshold
-            ));
+            return bad_parameter(
+                "ogale.match_threshold",
+                format!("= {} must be at most 255", self.match_threshold),
+            );
         }
         if self.edge_threshold > 255 {
-            return bad(format!(
-                "ogale edge_threshold {} must be at most 255",
-                self.edge_threshold
-            ));
+            return bad_parameter(
+                "ogale.edge_threshold",
+                format!("= {} must be at most 255", self.edge_threshold),
+            );
         }
-        if self.uniqueness_pct > 100 {
-            return bad(format!(
-                "uniqueness_pct {} must be at most 100",
-                self.uniqueness_pct
-            ));
-        }
+        check_uniqueness(self.uniqueness_pct)?;
         if self.vertical_search_px > MAX_VERTICAL_SEARCH_PX {
-            return bad(format!(
-                "ogale vertical search {} px must be at most {MAX_VERTICAL_SEARCH_PX}",
-                self.vertical_search_px
-            ));
+            return bad_parameter(
+                "ogale.vertical_search_px",
+                format!(
+                    "= {} px must be at most {MAX_VERTICAL_SEARCH_PX}",
+                    self.vertical_search_px
+                ),
+            );
         }
         if self.stretch.is_empty() {
-            return bad("ogale stretch needs at least one factor (1.0 = fronto-parallel)".into());
+            return bad_parameter(
+                "ogale.stretch",
+                "needs at least one factor (1.0 = fronto-parallel)",
+            );
         }
         for &m in &self.stretch {
             if !m.is_finite() || !(MIN_STRETCH..=MAX_STRETCH).contains(&m) {
-                return bad(format!(
-                    "ogale stretch factor {m} must be in {MIN_STRETCH}..={MAX_STRETCH}"
-                ));
+                return bad_parameter(
+                    "ogale.stretch",
+                    format!("factor {m} must be in {MIN_STRETCH}..={MAX_STRETCH}"),
+                );
             }
         }
         Ok(())
@@ -1176,9 +1181,10 @@ impl StereoMatcher for OgaleMatcher {
         let p = &self.params;
         check_fits(&left, p.max_disp, 1)?;
         if w > MAX_WIDTH_PX {
-            return Err(StereoError::BadParameter(format!(
-                "ogale handles images up to {MAX_WIDTH_PX} px wide, not {w}"
-            )));
+            return Err(StereoError::ImageTooWide {
+                width: w,
+                max_width: MAX_WIDTH_PX,
+            });
         }
         let n = w * h;
         self.right_eq.resize(n, 0);
@@ -1474,24 +1480,27 @@ mod tests {
             bad(params(20, 20)),
             StereoError::BadRange { min: 20, max: 20 }
         ));
-        assert!(matches!(bad(params(0, 300)), StereoError::BadParameter(_)));
+        assert!(matches!(
+            bad(params(0, 300)),
+            StereoError::BadParameter { .. }
+        ));
         for stretch in [vec![], vec![0.2], vec![f32::NAN], vec![1.0, 3.0]] {
             let p = OgaleParams {
                 stretch,
                 ..ok.clone()
             };
-            assert!(matches!(bad(p), StereoError::BadParameter(_)));
+            assert!(matches!(bad(p), StereoError::BadParameter { .. }));
         }
         let p = OgaleParams {
             match_threshold: 256,
             ..ok.clone()
         };
-        assert!(matches!(bad(p), StereoError::BadParameter(_)));
+        assert!(matches!(bad(p), StereoError::BadParameter { .. }));
         let p = OgaleParams {
             vertical_search_px: 3,
             ..ok.clone()
         };
-        assert!(matches!(bad(p), StereoError::BadParameter(_)));
+        assert!(matches!(bad(p), StereoError::BadParameter { .. }));
         let config = StereoConfig {
             min_disp: 30,
             max_disp: 10,

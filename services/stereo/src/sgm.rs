@@ -65,7 +65,8 @@ use crate::census::{census, census_with};
 use crate::equalize::equalize_right;
 use crate::post::{lr_check, speckle_filter};
 use crate::{
-    ImageView, MatchStats, StereoError, StereoMatcher, check_fits, check_pair, check_range,
+    ImageView, MatchStats, StereoError, StereoMatcher, bad_parameter, check_fits, check_pair,
+    check_range, check_uniqueness,
 };
 
 /// Census window width and height (5x5: 24 comparisons, costs 0..=24).
@@ -159,36 +160,42 @@ impl SgmParams {
     /// Checks the parameters on their own (image size is checked per call).
     pub fn validate(&self) -> Result<(), StereoError> {
         check_range(self.min_disp, self.max_disp)?;
-        let bad = |msg: String| Err(StereoError::BadParameter(msg));
         if self.max_disp > 255 {
-            return bad(format!(
-                "sgm max_disp {} must be at most 255",
-                self.max_disp
-            ));
+            return bad_parameter(
+                "max_disp",
+                format!("= {} must be at most 255 for sgm", self.max_disp),
+            );
         }
         if !matches!(self.paths, 4 | 5 | 8) {
-            return bad(format!("sgm paths {} must be 4, 5 or 8", self.paths));
+            return bad_parameter("sgm.paths", format!("= {} must be 4, 5 or 8", self.paths));
         }
         if !BLOCK_SIZES.contains(&self.block) {
-            return bad(format!("sgm block {} must be 1, 3, 5 or 7", self.block));
+            return bad_parameter(
+                "sgm.block",
+                format!("= {} must be 1, 3, 5 or 7", self.block),
+            );
         }
         if self.p2 > MAX_P2 || self.p1 > self.p2 {
-            return bad(format!(
-                "sgm penalties p1 {} and p2 {} must satisfy p1 <= p2 <= {MAX_P2}",
-                self.p1, self.p2
-            ));
+            return bad_parameter(
+                "sgm.p2",
+                format!(
+                    "penalties p1 = {}, p2 = {} need p1 <= p2 <= {MAX_P2} (path costs fit a byte)",
+                    self.p1, self.p2
+                ),
+            );
         }
-        if self.uniqueness_pct >= 100 {
-            return bad(format!(
-                "uniqueness_pct {} must be below 100",
-                self.uniqueness_pct
-            ));
+        check_uniqueness(self.uniqueness_pct)?;
+        if !(0.0..=64.0).contains(&self.texture_threshold) {
+            return bad_parameter(
+                "sgm.texture_threshold",
+                format!("= {} must be in 0..=64 grey levels", self.texture_threshold),
+            );
         }
-        if self.texture_radius > 15 || !(0.0..=64.0).contains(&self.texture_threshold) {
-            return bad(format!(
-                "texture radius {} (at most 15) or threshold {} (0..=64) out of range",
-                self.texture_radius, self.texture_threshold
-            ));
+        if self.texture_radius > 15 {
+            return bad_parameter(
+                "sgm.texture_radius",
+                format!("= {} must be at most 15", self.texture_radius),
+            );
         }
         Ok(())
     }
@@ -2977,7 +2984,7 @@ mod tests {
         ));
         assert!(matches!(
             SgmMatcher::from_config(&config(0, 300)),
-            Err(StereoError::BadParameter(_))
+            Err(StereoError::BadParameter { .. })
         ));
         for (p1, p2, paths) in [(4, 32, 6), (4, 80, 5), (40, 32, 5)] {
             let mut c = config(0, 16);
@@ -2990,7 +2997,7 @@ mod tests {
             assert!(
                 matches!(
                     SgmMatcher::from_config(&c),
-                    Err(StereoError::BadParameter(_))
+                    Err(StereoError::BadParameter { .. })
                 ),
                 "{p1} {p2} {paths}"
             );
@@ -2999,7 +3006,7 @@ mod tests {
         c.uniqueness_pct = 100;
         assert!(matches!(
             SgmMatcher::from_config(&c),
-            Err(StereoError::BadParameter(_))
+            Err(StereoError::BadParameter { .. })
         ));
         assert!(
             SgmMatcher::from_config(&config(0, 16))
