@@ -373,8 +373,7 @@ impl BlockMatcher {
     pub fn new(params: BlockParams) -> Result<Self, StereoError> {
         params.validate()?;
         #[cfg(target_arch = "x86_64")]
-        let avx2 = std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("popcnt");
+        let avx2 = crate::cpu::avx2_popcnt();
         #[cfg(not(target_arch = "x86_64"))]
         let avx2 = false;
         Ok(Self {
@@ -410,9 +409,7 @@ impl BlockMatcher {
     pub fn set_simd(&mut self, on: bool) -> bool {
         #[cfg(target_arch = "x86_64")]
         {
-            self.avx2 = on
-                && std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("popcnt");
+            self.avx2 = on && crate::cpu::avx2_popcnt();
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
@@ -961,7 +958,7 @@ fn run<T: Term, A: Acc>(job: &Job<'_, T::F>, stripes: &mut [Stripe], outs: Outpu
 fn run_stripe<T: Term, A: Acc>(job: &Job<'_, T::F>, stripe: &mut Stripe, part: Part<'_>) {
     #[cfg(target_arch = "x86_64")]
     if job.checks.avx2 {
-        // SAFETY: `checks.avx2` is only set when `is_x86_feature_detected!` found AVX2 and
+        // SAFETY: `checks.avx2` is only set when `crate::cpu::avx2_popcnt` found AVX2 and
         // POPCNT on this CPU.
         unsafe { stripe_avx2::<T, A>(job, stripe, part) };
         return;

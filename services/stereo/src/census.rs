@@ -42,7 +42,7 @@ pub fn census_with(
     }
     let (rx, ry) = (win_w / 2, win_h / 2);
     #[cfg(target_arch = "x86_64")]
-    let simd = simd && width >= 2 * rx + 32 && std::arch::is_x86_feature_detected!("avx2");
+    let simd = simd && width >= 2 * rx + 32 && crate::cpu::avx2();
     #[cfg(not(target_arch = "x86_64"))]
     let simd = {
         let _ = simd;

@@ -14,6 +14,7 @@
 
 pub mod block;
 pub mod census;
+pub mod cpu;
 pub mod equalize;
 pub mod eval;
 pub mod ogale;
