@@ -5,6 +5,7 @@ mod bench_stages;
 mod control;
 mod doctor;
 mod drive;
+mod policy;
 mod probe_cli;
 mod process;
 mod procstat;

@@ -5,7 +5,6 @@
 //! status period print one line and publish the status table. A stage is only ever started,
 //! stopped or restarted on its own: the others keep their processes.
 
-use std::collections::VecDeque;
 use std::fs::File;
 use std::io::Write;
 use std::os::fd::AsRawFd;
@@ -16,7 +15,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use bytemuck::Zeroable;
 use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::{CaptureSource, HvsConfig, RestartPolicy, StageSpec, run_dir};
+use hvs_shared::config::{CaptureSource, HvsConfig, StageSpec, run_dir};
 use hvs_shared::ipc::{IpcNode, TopicPublisher, TopicSubscriber};
 use hvs_shared::messages::{
     ActuatorReport, ControlCommand, Decision, MAX_STAGES, MotionCommand, NOTE_LEN, SendReason,
@@ -27,14 +26,13 @@ use hvs_shared::stats::LatencyWindow;
 use hvs_shared::topics;
 use nix::sys::signal::Signal;
 
+use crate::policy::{self, ExitVerdict, RestartHistory};
 use crate::process::{self, Launch};
 use crate::procstat::{self, ProcSample};
 use crate::report::{LatencyReport, RunReport, SimReport, StageReport};
 
 /// Supervisor loop period.
 const TICK: Duration = Duration::from_millis(20);
-/// A stage that ran this long without trouble gets its backoff reset.
-const HEALTHY_AFTER: Duration = Duration::from_secs(5);
 /// Log filter for stages when RUST_LOG is not set: stage start-up and problems, but not the
 /// per-stage status lines (the supervisor prints one line for all of them).
 const DEFAULT_STAGE_LOG: &str = "info,hvs_status=off";
@@ -175,8 +173,8 @@ struct Slot {
     restart_requested: bool,
     stop_deadline: Option<Instant>,
     restarts: u32,
-    failures: VecDeque<Instant>,
-    backoff: Duration,
+    /// What the restart policy remembers ([`policy::RestartHistory`]).
+    history: RestartHistory,
     next_start: Option<Instant>,
     last_exit: i32,
     past: Counters,
@@ -324,7 +322,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
             StageState::Disabled
         };
         slots.push(Slot {
-            backoff: Duration::from_millis(spec.backoff_ms),
+            history: RestartHistory::new(&spec),
             spec,
             program,
             heartbeat,
@@ -339,7 +337,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
             restart_requested: false,
             stop_deadline: None,
             restarts: 0,
-            failures: VecDeque::new(),
             next_start: None,
             last_exit: 0,
             past: Counters::default(),
@@ -564,8 +561,7 @@ impl Supervisor {
             StageState::Stopping => {}
             _ => {
                 // Stopped, failed or waiting out a backoff: start it now with a fresh budget.
-                slot.failures.clear();
-                slot.backoff = Duration::from_millis(slot.spec.backoff_ms);
+                slot.history.reset(&slot.spec);
                 slot.restarts += 1;
                 self.start(i);
             }
@@ -641,19 +637,12 @@ impl Supervisor {
             }
             // Hang detection: no heartbeat for too long (a stopped or stuck main loop).
             let slot = &mut self.slots[i];
-            let silent_for = slot
-                .last_heartbeat
-                .map(|t| t.elapsed())
-                .unwrap_or_else(|| slot.spawned_at.elapsed());
-            let limit = match slot.state {
-                StageState::Running => Some(Duration::from_millis(slot.spec.heartbeat_timeout_ms)),
-                StageState::Starting => Some(startup_timeout),
-                _ => None,
-            };
-            if let Some(limit) = limit
-                && silent_for > limit
-                && !slot.hung
+            let silent_since = slot.last_heartbeat.unwrap_or(slot.spawned_at);
+            let now = Instant::now();
+            if !slot.hung
+                && policy::is_hung(slot.state, &slot.spec, startup_timeout, silent_since, now)
             {
+                let silent_for = now.saturating_duration_since(silent_since);
                 tracing::warn!(
                     "hvs: {} (pid {}) sent no heartbeat for {} ms: killing it",
                     slot.spec.name,
@@ -714,56 +703,42 @@ impl Supervisor {
             self.start(i);
             return;
         }
-        let restart = match slot.spec.restart {
-            RestartPolicy::Always => true,
-            RestartPolicy::OnFailure => failed,
-            RestartPolicy::Never => false,
-        };
-        if !restart {
-            slot.state = if failed {
-                StageState::Failed
-            } else {
-                StageState::Stopped
-            };
-            if failed {
+        match slot
+            .history
+            .after_exit(&slot.spec, failed, ran_for, Instant::now())
+        {
+            ExitVerdict::Leave { failed } => {
+                slot.state = if failed {
+                    StageState::Failed
+                } else {
+                    StageState::Stopped
+                };
+                if failed {
+                    tracing::error!(
+                        "hvs: {} will not be restarted (policy {:?})",
+                        slot.spec.name,
+                        slot.spec.restart
+                    );
+                }
+            }
+            ExitVerdict::GiveUp { failures } => {
+                slot.state = StageState::Failed;
                 tracing::error!(
-                    "hvs: {} will not be restarted (policy never)",
-                    slot.spec.name
+                    "hvs: giving up on {} after {failures} restarts within {} s",
+                    slot.spec.name,
+                    slot.spec.restart_window_s
                 );
             }
-            return;
+            ExitVerdict::RestartAt { at, backoff } => {
+                slot.state = StageState::Backoff;
+                slot.next_start = Some(at);
+                tracing::info!(
+                    "hvs: {} restarts in {} ms",
+                    slot.spec.name,
+                    backoff.as_millis()
+                );
+            }
         }
-        if ran_for >= HEALTHY_AFTER {
-            slot.backoff = Duration::from_millis(slot.spec.backoff_ms);
-        }
-        let window = Duration::from_secs(slot.spec.restart_window_s);
-        let now = Instant::now();
-        while slot
-            .failures
-            .front()
-            .is_some_and(|t| now.duration_since(*t) > window)
-        {
-            slot.failures.pop_front();
-        }
-        if slot.failures.len() as u32 >= slot.spec.max_restarts {
-            slot.state = StageState::Failed;
-            tracing::error!(
-                "hvs: giving up on {} after {} restarts within {} s",
-                slot.spec.name,
-                slot.failures.len(),
-                slot.spec.restart_window_s
-            );
-            return;
-        }
-        slot.failures.push_back(now);
-        slot.state = StageState::Backoff;
-        slot.next_start = Some(now + slot.backoff);
-        tracing::info!(
-            "hvs: {} restarts in {} ms",
-            slot.spec.name,
-            slot.backoff.as_millis()
-        );
-        slot.backoff = (slot.backoff * 2).min(Duration::from_millis(slot.spec.max_backoff_ms));
     }
 
     fn poll_pipeline(
