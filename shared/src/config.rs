@@ -369,7 +369,11 @@ pub struct ReplayCaptureConfig {
     /// goes out when the decision on the previous one arrives). Only lockstep reproduces the
     /// recorded decisions exactly.
     pub rate_hz: f64,
-    /// In lockstep: longest wait for the pipeline before the next pair, ms.
+    /// In lockstep: longest wait for the pipeline before the next pair, ms. Only a broken
+    /// pipeline should reach it (a stage that died with the frame; the supervisor restarts
+    /// it): going on early lets the next frame overtake the awaited one, and that decision is
+    /// lost. The default is long because on a machine whose cores other programs keep busy
+    /// the niced 640x480 worker took over 2 s for one frame, and a replay is not real-time.
     pub lockstep_timeout_ms: u64,
 }
 
@@ -378,7 +382,7 @@ impl Default for ReplayCaptureConfig {
         Self {
             file: PathBuf::from("run.mcap"),
             rate_hz: 0.0,
-            lockstep_timeout_ms: 2000,
+            lockstep_timeout_ms: 10_000,
         }
     }
 }

@@ -697,7 +697,12 @@ pub struct ActuatorReport {
     /// Pulse width sent to the right wheels, 2 us units.
     pub right_pw: u16,
     /// Number of valid bytes in `bytes`.
-    pub byte_count: u32,
+    pub byte_count: u16,
+    /// The PSC ramp of both wheel commands (0 = instant, larger = slower change), so that a
+    /// reader need not decode the PSC bytes.
+    pub ramp: u8,
+    /// Zero.
+    pub reserved: u8,
     /// The bytes written, both wheel commands (2 x 8 bytes).
     pub bytes: [u8; 16],
 }

@@ -58,6 +58,7 @@ fn frames_reach_every_stage_and_stop_is_orderly() {
         while let Some(r) = sent.receive().expect("receive") {
             let r = r.payload();
             assert_eq!(r.byte_count, 16);
+            assert_eq!(r.ramp, r.bytes[4], "the ramp field is the PSC command's");
             assert_eq!(&r.bytes[..3], b"!SC");
             assert_eq!(&r.bytes[8..11], b"!SC");
             if SendReason::from_code(r.reason) == Some(SendReason::Decision) {

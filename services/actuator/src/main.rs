@@ -101,7 +101,9 @@ impl Connection {
             command: out.command as u32,
             left_pw: out.left_pw,
             right_pw: out.right_pw,
-            byte_count: out.bytes.len() as u32,
+            byte_count: out.bytes.len() as u16,
+            ramp: out.ramp,
+            reserved: 0,
             bytes: out.bytes,
         };
         match reports.publish_copy(&report) {

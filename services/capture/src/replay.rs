@@ -136,6 +136,10 @@ struct SentJson {
     decision_published_ns: u64,
     sent_ns: u64,
     bytes_hex: String,
+    /// Absent in recordings made before the report carried it: then read from the first
+    /// PSC command (`!SC`, channel, ramp, ...).
+    #[serde(default)]
+    ramp: Option<u8>,
 }
 
 impl SentJson {
@@ -166,7 +170,9 @@ impl SentJson {
             command: command as u32,
             left_pw: self.left_pw,
             right_pw: self.right_pw,
-            byte_count: hex.len() as u32,
+            byte_count: hex.len() as u16,
+            ramp: self.ramp.unwrap_or(bytes[4]),
+            reserved: 0,
             bytes,
         })
     }
@@ -782,7 +788,7 @@ mod tests {
                 ReplayEvent::Sent(r) => {
                     assert!(r.sent_ns >= last_time);
                     assert_eq!(
-                        (r.left_pw, r.right_pw, r.bytes[4], r.byte_count),
+                        (r.left_pw, r.right_pw, r.ramp, r.byte_count),
                         (800, 700, 5, 8)
                     );
                     last_time = r.sent_ns;

@@ -56,7 +56,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     // Only without frames for seconds: the oldest output is applied late
                     // rather than lost.
                     if let Some(a) = pending_sent.pop_front() {
-                        nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.bytes[4]);
+                        nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.ramp);
                     }
                 }
                 pending_sent.push_back(*report.payload());
@@ -73,7 +73,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             let r = report.payload();
             while let Some(a) = pending_sent.front().filter(|a| a.sent_ns <= r.capture_ns) {
                 // Byte 4 of a PSC position command is its ramp.
-                nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.bytes[4]);
+                nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.ramp);
                 pending_sent.pop_front();
             }
             let d = nav.decide(&r.windows, r.window_count as usize, &r.scan, r.capture_ns);

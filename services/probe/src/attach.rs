@@ -14,15 +14,15 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use hvs_fusion::{Canny, DepthModel, fuse, sobel_edges};
+use hvs_fusion::{DepthModel, FusionPath};
 use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::{EdgeDetector, HvsConfig, STAGE_NAMES};
+use hvs_shared::config::{HvsConfig, STAGE_NAMES};
 use hvs_shared::ipc::{
     IpcNode, NodeOpenError, ReceiveError, ReceivedSample, TopicOpenError, TopicSubscriber,
 };
 use hvs_shared::messages::{
-    Decision, DisparityHeader, DisparityMap320x240, DisparityMap640x480, Sequenced, StageHeartbeat,
-    StereoFrame320x240, StereoFrame640x480, SupervisorStatus,
+    Decision, DisparityHeader, DisparityMap320x240, DisparityMap640x480, RangeSource, Sequenced,
+    StageHeartbeat, StereoFrame320x240, StereoFrame640x480, SupervisorStatus,
 };
 use hvs_shared::topics::{
     self, SERVICE_ROOT, Topic, TopicByPath, known_topic_paths, topic_by_path,
@@ -1054,31 +1054,17 @@ fn snapshot_fused<D: DisparityPayload, F: PairPayload>(
             if F::SIZE != D::SIZE {
                 continue;
             }
-            let mut edges = vec![0u8; left.len()];
-            match config.fusion.edges {
-                EdgeDetector::Canny => {
-                    Canny::new().detect(
-                        left,
-                        w as usize,
-                        h as usize,
-                        config.fusion.canny_low,
-                        config.fusion.canny_high,
-                        &mut edges,
-                    );
-                }
-                EdgeDetector::Sobel => {
-                    sobel_edges(
-                        left,
-                        w as usize,
-                        h as usize,
-                        config.fusion.canny_high,
-                        &mut edges,
-                    );
-                }
-            }
-            let mut fused_q8 = vec![0u16; left.len()];
-            fuse(&edges, d.disparity_q8(), &mut fused_q8);
-            let img = fused_image(left, &fused_q8, w, h, &colour_scale(d.header(), w, config));
+            // Fusion's own path (its edge detector and thresholds from the config), so that
+            // the snapshot shows what the fusion stage computes.
+            let source = if w >= 640 {
+                RangeSource::Hi
+            } else {
+                RangeSource::Lo
+            };
+            let mut path = FusionPath::new(config, w as usize, h as usize, source);
+            path.ranges(left, d.disparity_q8(), None);
+            let fused_q8 = path.fused();
+            let img = fused_image(left, fused_q8, w, h, &colour_scale(d.header(), w, config));
             save_png(&img, &opts.out)?;
             return Ok(SnapshotInfo {
                 frame_id: id,

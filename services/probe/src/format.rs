@@ -315,6 +315,7 @@ impl Describe for ActuatorReport {
             "command": MotionCommand::from_code(self.command).label(),
             "left_pw": self.left_pw,
             "right_pw": self.right_pw,
+            "ramp": self.ramp,
             "decision_frame_id": self.decision_frame_id,
             "decision_capture_ns": self.decision_capture_ns,
             "decision_published_ns": self.decision_published_ns,
