@@ -40,24 +40,30 @@ pub fn iceoryx_config() -> &'static Config {
     &CONFIG
 }
 
+/// An iceoryx2 error, kept whole as the source of hvs's own (each iceoryx2 operation has its
+/// own error enum; callers match hvs's variants, and the chain still shows iceoryx2's).
+pub type IoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
 /// Why a node could not be created.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeOpenError {
     /// The node name is not a valid iceoryx2 node name.
-    #[error("invalid iceoryx2 node name {name:?}: {detail}")]
+    #[error("invalid iceoryx2 node name {name:?}: {source}")]
     InvalidName {
         /// The name.
         name: String,
-        /// iceoryx2's reason.
-        detail: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
     },
     /// iceoryx2 refused to create the node.
-    #[error("cannot create iceoryx2 node {name:?}: {detail}")]
+    #[error("cannot create iceoryx2 node {name:?}: {source}")]
     Create {
         /// The name.
         name: String,
-        /// iceoryx2's reason.
-        detail: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
     },
 }
 
@@ -65,12 +71,13 @@ pub enum NodeOpenError {
 #[derive(Debug, thiserror::Error)]
 pub enum TopicOpenError {
     /// The service name is invalid.
-    #[error("invalid service name {service:?}: {detail}")]
+    #[error("invalid service name {service:?}: {source}")]
     InvalidName {
         /// The service.
         service: String,
-        /// iceoryx2's reason.
-        detail: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
     },
     /// The service does not exist (only when opening without creating).
     #[error("service {service:?} does not exist (is the pipeline of this instance running?)")]
@@ -79,22 +86,24 @@ pub enum TopicOpenError {
         service: String,
     },
     /// The service exists with incompatible settings or could not be created.
-    #[error("cannot open service {service:?}: {detail}")]
+    #[error("cannot open service {service:?}: {source}")]
     Service {
         /// The service.
         service: String,
-        /// iceoryx2's reason.
-        detail: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
     },
     /// The publisher, subscriber, notifier or listener port could not be created.
-    #[error("cannot create {port} on service {service:?}: {detail}")]
+    #[error("cannot create {port} on service {service:?}: {source}")]
     Port {
         /// The service.
         service: String,
         /// Which port.
         port: &'static str,
-        /// iceoryx2's reason.
-        detail: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
     },
 }
 
@@ -102,31 +111,34 @@ pub enum TopicOpenError {
 #[derive(Debug, thiserror::Error)]
 pub enum PublishError {
     /// No shared-memory sample could be loaned.
-    #[error("cannot loan a sample on {service:?}: {detail}")]
+    #[error("cannot loan a sample on {service:?}: {source}")]
     Loan {
         /// The service.
         service: String,
-        /// iceoryx2's reason.
-        detail: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
     },
     /// The sample could not be delivered.
-    #[error("cannot send on {service:?}: {detail}")]
+    #[error("cannot send on {service:?}: {source}")]
     Send {
         /// The service.
         service: String,
-        /// iceoryx2's reason.
-        detail: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
     },
 }
 
 /// Why receiving failed.
 #[derive(Debug, thiserror::Error)]
-#[error("cannot receive on {service:?}: {detail}")]
+#[error("cannot receive on {service:?}: {source}")]
 pub struct ReceiveError {
     /// The service.
     pub service: String,
-    /// iceoryx2's reason.
-    pub detail: String,
+    /// iceoryx2's error.
+    #[source]
+    pub source: IoxError,
 }
 
 /// An iceoryx2 node of one hvs process, bound to an instance.
@@ -139,9 +151,9 @@ impl IpcNode {
     /// Creates the node `name` for `instance`, first removing resources that crashed processes
     /// left behind (iceoryx2 issues 1584/601), so a restarted stage can reopen its services.
     pub fn create(instance: &str, name: &str) -> Result<Self, NodeOpenError> {
-        let node_name: NodeName = name.try_into().map_err(|e| NodeOpenError::InvalidName {
+        let node_name = NodeName::new(name).map_err(|e| NodeOpenError::InvalidName {
             name: name.to_string(),
-            detail: format!("{e:?}"),
+            source: e.into(),
         })?;
         let removed = cleanup_dead_nodes();
         if removed > 0 {
@@ -154,7 +166,7 @@ impl IpcNode {
             .create::<IpcService>()
             .map_err(|e| NodeOpenError::Create {
                 name: name.to_string(),
-                detail: format!("{e:?}"),
+                source: e.into(),
             })?;
         Ok(Self {
             node,
@@ -233,7 +245,7 @@ impl IpcNode {
                     return Err(TopicOpenError::Port {
                         service,
                         port: "publisher",
-                        detail: format!("{e:?}"),
+                        source: e.into(),
                     });
                 }
             }
@@ -245,7 +257,7 @@ impl IpcNode {
             .map_err(|e| TopicOpenError::Port {
                 service: service.clone(),
                 port: "notifier",
-                detail: format!("{e:?}"),
+                source: e.into(),
             })?;
         Ok(TopicPublisher {
             publisher,
@@ -334,7 +346,7 @@ impl IpcNode {
             .map_err(|e| TopicOpenError::Port {
                 service: service.clone(),
                 port: "subscriber",
-                detail: format!("{e:?}"),
+                source: e.into(),
             })?;
         let events = self.event_service(&service, create)?;
         let listener = events
@@ -343,7 +355,7 @@ impl IpcNode {
             .map_err(|e| TopicOpenError::Port {
                 service: service.clone(),
                 port: "listener",
-                detail: format!("{e:?}"),
+                source: e.into(),
             })?;
         Ok(TopicSubscriber {
             subscriber,
@@ -367,12 +379,10 @@ impl IpcNode {
     where
         T: Debug + ZeroCopySend + 'static,
     {
-        let name: ServiceName = service
-            .try_into()
-            .map_err(|e| TopicOpenError::InvalidName {
-                service: service.to_string(),
-                detail: format!("{e:?}"),
-            })?;
+        let name = ServiceName::new(service).map_err(|e| TopicOpenError::InvalidName {
+            service: service.to_string(),
+            source: e.into(),
+        })?;
         let builder = self
             .node
             .service_builder(&name)
@@ -388,7 +398,7 @@ impl IpcNode {
                 .open_or_create()
                 .map_err(|e| TopicOpenError::Service {
                     service: service.to_string(),
-                    detail: format!("{e:?}"),
+                    source: e.into(),
                 })
         } else {
             builder.open().map_err(|e| match e {
@@ -399,7 +409,7 @@ impl IpcNode {
                 }
                 e => TopicOpenError::Service {
                     service: service.to_string(),
-                    detail: format!("{e:?}"),
+                    source: e.into(),
                 },
             })
         }
@@ -411,12 +421,10 @@ impl IpcNode {
         create: bool,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<IpcService>, TopicOpenError>
     {
-        let name: ServiceName = service
-            .try_into()
-            .map_err(|e| TopicOpenError::InvalidName {
-                service: service.to_string(),
-                detail: format!("{e:?}"),
-            })?;
+        let name = ServiceName::new(service).map_err(|e| TopicOpenError::InvalidName {
+            service: service.to_string(),
+            source: e.into(),
+        })?;
         let builder = self
             .node
             .service_builder(&name)
@@ -424,13 +432,13 @@ impl IpcNode {
             .max_notifiers(8)
             .max_listeners(16);
         let result = if create {
-            builder.open_or_create().map_err(|e| format!("{e:?}"))
+            builder.open_or_create().map_err(IoxError::from)
         } else {
-            builder.open().map_err(|e| format!("{e:?}"))
+            builder.open().map_err(IoxError::from)
         };
-        result.map_err(|detail| TopicOpenError::Service {
+        result.map_err(|source| TopicOpenError::Service {
             service: format!("{service} (event)"),
-            detail,
+            source,
         })
     }
 }
@@ -509,7 +517,7 @@ impl<T: Debug + ZeroCopySend + Pod + 'static> TopicPublisher<T> {
             .loan_uninit()
             .map_err(|e| PublishError::Loan {
                 service: self.service.clone(),
-                detail: format!("{e:?}"),
+                source: e.into(),
             })?;
         // SAFETY: `T: Pod`, so every bit pattern is a valid `T`; the slot is shared memory that
         // the OS zero-filled when it was mapped and that earlier samples may have overwritten,
@@ -521,7 +529,7 @@ impl<T: Debug + ZeroCopySend + Pod + 'static> TopicPublisher<T> {
     pub fn send(&mut self, sample: LoanedSample<T>) -> Result<usize, PublishError> {
         let receivers = sample.send().map_err(|e| PublishError::Send {
             service: self.service.clone(),
-            detail: format!("{e:?}"),
+            source: e.into(),
         })?;
         self.sent += 1;
         if let Err(e) = self.notifier.notify() {
@@ -583,7 +591,7 @@ impl<T: Debug + ZeroCopySend + Sequenced + 'static> TopicSubscriber<T> {
     pub fn receive(&self) -> Result<Option<ReceivedSample<T>>, ReceiveError> {
         let sample = self.subscriber.receive().map_err(|e| ReceiveError {
             service: self.service.clone(),
-            detail: format!("{e:?}"),
+            source: e.into(),
         })?;
         if let Some(s) = &sample {
             self.account(s.payload().sequence());
