@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::messages::StereoAlgorithm;
-use crate::topics;
+use crate::topics::{self, Stage};
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -47,16 +47,16 @@ pub enum ConfigError {
     },
 }
 
-/// The stages the supervisor knows, in start order.
-pub const STAGE_NAMES: [&str; 7] = [
-    "sim",
-    "capture",
-    "stereo-lo",
-    "stereo-hi",
-    "fusion",
-    "decision",
-    "actuator",
-];
+/// The names of the stages the supervisor knows, in start order ([`Stage::ALL`]'s names).
+pub const STAGE_NAMES: [&str; 7] = {
+    let mut names = [""; 7];
+    let mut i = 0;
+    while i < 7 {
+        names[i] = Stage::ALL[i].name();
+        i += 1;
+    }
+    names
+};
 
 /// The whole configuration.
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -1007,7 +1007,9 @@ pub struct StageOverride {
 /// A stage's resolved process settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StageSpec {
-    /// Stage name (one of [`STAGE_NAMES`]).
+    /// The stage.
+    pub stage: Stage,
+    /// Its name ([`Stage::name`]).
     pub name: String,
     /// Program name or path.
     pub program: String,
@@ -1038,16 +1040,9 @@ pub struct StageSpec {
 /// feeds nothing the robot waits for (fusion ages its results out after `hi_max_age_ms`).
 pub const NICED_HEARTBEAT_TIMEOUT_MS: u64 = 5000;
 
-/// The binary that runs a stage by default.
+/// The binary that runs a stage by default (`hvs-actuator` for a name that is no stage).
 pub fn default_program(stage: &str) -> &'static str {
-    match stage {
-        "sim" => "hvs-sim",
-        "capture" => "hvs-capture",
-        "stereo-lo" | "stereo-hi" => "hvs-stereo",
-        "fusion" => "hvs-fusion",
-        "decision" => "hvs-decision",
-        _ => "hvs-actuator",
-    }
+    Stage::from_name(stage).map_or("hvs-actuator", Stage::default_program)
 }
 
 impl HvsConfig {
@@ -1567,9 +1562,9 @@ impl HvsConfig {
     /// Whether a stage is enabled (default: all, `sim` only with the sim capture source, and
     /// `actuator` not in a replay).
     pub fn stage_enabled(&self, stage: &str) -> bool {
-        let default = match stage {
-            "sim" => self.capture.source == CaptureSource::Sim,
-            "actuator" => self.capture.source != CaptureSource::Replay,
+        let default = match Stage::from_name(stage) {
+            Some(Stage::Sim) => self.capture.source == CaptureSource::Sim,
+            Some(Stage::Actuator) => self.capture.source != CaptureSource::Replay,
             _ => true,
         };
         self.stages
@@ -1580,16 +1575,20 @@ impl HvsConfig {
 
     /// The resolved process settings of every known stage, in start order.
     pub fn stage_specs(&self) -> Vec<StageSpec> {
-        STAGE_NAMES
-            .iter()
-            .map(|&name| {
+        Stage::ALL
+            .into_iter()
+            .map(|stage| {
+                let name = stage.name();
                 let o = self.stages.get(name).cloned().unwrap_or_default();
-                let nice = o.nice.unwrap_or(if name == "stereo-hi" { 10 } else { 0 });
+                let nice = o
+                    .nice
+                    .unwrap_or(if stage == Stage::StereoHi { 10 } else { 0 });
                 StageSpec {
+                    stage,
                     name: name.to_string(),
                     program: o
                         .program
-                        .unwrap_or_else(|| default_program(name).to_string()),
+                        .unwrap_or_else(|| stage.default_program().to_string()),
                     args: o.args.unwrap_or_default(),
                     enabled: self.stage_enabled(name),
                     restart: o.restart.unwrap_or(RestartPolicy::Always),
@@ -1612,9 +1611,9 @@ impl HvsConfig {
 
     /// The stereo settings for a stage name (`stereo-lo` or `stereo-hi`).
     pub fn stereo_for(&self, stage: &str) -> Option<&StereoConfig> {
-        match stage {
-            "stereo-lo" => Some(&self.stereo.lo),
-            "stereo-hi" => Some(&self.stereo.hi),
+        match Stage::from_name(stage)? {
+            Stage::StereoLo => Some(&self.stereo.lo),
+            Stage::StereoHi => Some(&self.stereo.hi),
             _ => None,
         }
     }

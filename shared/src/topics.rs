@@ -146,6 +146,76 @@ pub const SUPERVISOR_STATUS: Topic<SupervisorStatus> = Topic::new("supervisor/st
 pub const SUPERVISOR_CONTROL: Topic<ControlRequest> =
     Topic::new("supervisor/control").with_publishers(4);
 
+/// The stages of the pipeline, in start order. Each is one process under the supervisor;
+/// [`Stage::name`] is its name in configs, service names (`heartbeat/<name>`), logs and
+/// `hvs restart <name>`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Stage {
+    /// The simulated world (camera, robot, servo controller on a pty).
+    Sim,
+    /// Frames from the cameras, the simulator, files or a recording.
+    Capture,
+    /// The 320x240 stereo matcher (every frame).
+    StereoLo,
+    /// The 640x480 stereo worker (as fast as it can).
+    StereoHi,
+    /// Edges, disparity and ranges.
+    Fusion,
+    /// The navigator.
+    Decision,
+    /// The servo controller link.
+    Actuator,
+}
+
+impl Stage {
+    /// Every stage, in start order.
+    pub const ALL: [Stage; 7] = [
+        Stage::Sim,
+        Stage::Capture,
+        Stage::StereoLo,
+        Stage::StereoHi,
+        Stage::Fusion,
+        Stage::Decision,
+        Stage::Actuator,
+    ];
+
+    /// The stage's name (`stereo-lo`, ...).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Stage::Sim => "sim",
+            Stage::Capture => "capture",
+            Stage::StereoLo => "stereo-lo",
+            Stage::StereoHi => "stereo-hi",
+            Stage::Fusion => "fusion",
+            Stage::Decision => "decision",
+            Stage::Actuator => "actuator",
+        }
+    }
+
+    /// The stage of a name, if it is one.
+    pub fn from_name(name: &str) -> Option<Stage> {
+        Stage::ALL.into_iter().find(|s| s.name() == name)
+    }
+
+    /// The binary that runs the stage by default.
+    pub const fn default_program(self) -> &'static str {
+        match self {
+            Stage::Sim => "hvs-sim",
+            Stage::Capture => "hvs-capture",
+            Stage::StereoLo | Stage::StereoHi => "hvs-stereo",
+            Stage::Fusion => "hvs-fusion",
+            Stage::Decision => "hvs-decision",
+            Stage::Actuator => "hvs-actuator",
+        }
+    }
+}
+
+impl core::fmt::Display for Stage {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// One input of a stage: the topic it waits on and the stage that publishes it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StageInput {

@@ -133,6 +133,7 @@ mod tests {
 
     fn spec(restart: RestartPolicy) -> StageSpec {
         StageSpec {
+            stage: hvs_shared::topics::Stage::Fusion,
             name: "fusion".into(),
             program: "hvs-fusion".into(),
             args: Vec::new(),

@@ -23,7 +23,7 @@ use hvs_shared::messages::{
     decode_name, encode_name,
 };
 use hvs_shared::stats::LatencyWindow;
-use hvs_shared::topics;
+use hvs_shared::topics::{self, Stage};
 use nix::sys::signal::Signal;
 
 use crate::policy::{self, ExitVerdict, RestartHistory};
@@ -681,7 +681,8 @@ impl Supervisor {
         let ran_for = slot.spawned_at.elapsed();
         slot.pid = 0;
         slot.cpu_s_past += slot.proc_now.take().map_or(0.0, |s| s.cpu_s);
-        if slot.spec.name == "capture" && self.config.capture.source == CaptureSource::Replay {
+        if slot.spec.stage == Stage::Capture && self.config.capture.source == CaptureSource::Replay
+        {
             // The end of the recording (the pipeline has decided on its last frame), or a
             // recording that cannot be read: played again from its start it would repeat
             // decisions, so the run ends either way, whatever the restart policy says.
@@ -891,7 +892,10 @@ impl Supervisor {
                 slot.state = StageState::Stopped;
             }
         }
-        if let Some(act) = self.slots.iter_mut().find(|s| s.spec.name == "actuator")
+        if let Some(act) = self
+            .slots
+            .iter_mut()
+            .find(|s| s.spec.stage == Stage::Actuator)
             && let Some(child) = act.child.as_mut()
         {
             let status = process::terminate(child, grace);
