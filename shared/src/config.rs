@@ -1040,11 +1040,6 @@ pub struct StageSpec {
 /// feeds nothing the robot waits for (fusion ages its results out after `hi_max_age_ms`).
 pub const NICED_HEARTBEAT_TIMEOUT_MS: u64 = 5000;
 
-/// The binary that runs a stage by default (`hvs-actuator` for a name that is no stage).
-pub fn default_program(stage: &str) -> &'static str {
-    Stage::from_name(stage).map_or("hvs-actuator", Stage::default_program)
-}
-
 impl HvsConfig {
     /// Reads, parses and validates a config file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {

@@ -141,6 +141,14 @@ pub struct ReceiveError {
     pub source: IoxError,
 }
 
+/// `service` as an iceoryx2 service name.
+fn service_name(service: &str) -> Result<ServiceName, TopicOpenError> {
+    ServiceName::new(service).map_err(|e| TopicOpenError::InvalidName {
+        service: service.to_string(),
+        source: e.into(),
+    })
+}
+
 /// An iceoryx2 node of one hvs process, bound to an instance.
 pub struct IpcNode {
     node: Node<IpcService>,
@@ -379,10 +387,7 @@ impl IpcNode {
     where
         T: Debug + ZeroCopySend + 'static,
     {
-        let name = ServiceName::new(service).map_err(|e| TopicOpenError::InvalidName {
-            service: service.to_string(),
-            source: e.into(),
-        })?;
+        let name = service_name(service)?;
         let builder = self
             .node
             .service_builder(&name)
@@ -421,10 +426,7 @@ impl IpcNode {
         create: bool,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<IpcService>, TopicOpenError>
     {
-        let name = ServiceName::new(service).map_err(|e| TopicOpenError::InvalidName {
-            service: service.to_string(),
-            source: e.into(),
-        })?;
+        let name = service_name(service)?;
         let builder = self
             .node
             .service_builder(&name)
