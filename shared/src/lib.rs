@@ -1,62 +1,15 @@
-//! The hvs IPC contract: everything the processes of a pipeline agree on.
+//! The hvs IPC contract: everything the processes of a pipeline agree on, and nothing else
+//! (no runtime, no configuration: a reader needs this crate, `bytemuck` and `iceoryx2`).
 //!
-//! - [`topics`]: every service, who publishes and who subscribes. **Read this first**: it is the
-//!   whole data flow of the robot in one file.
+//! - [`topics`]: every service, who publishes and who subscribes, and the stages. **Read this
+//!   first**: it is the whole data flow of the robot in one file.
 //! - [`messages`]: the fixed-size `#[repr(C)]` payloads written in place into shared memory
 //!   (byte layout in `docs/ipc.md`).
-//! - [`config`]: the TOML configuration every process loads and validates.
-//! - [`ipc`]: how a process opens topics, publishes in place and receives, on iceoryx2.
-//! - [`stage`]: the common skeleton of a stage process (arguments, logging, heartbeat, loop).
-//! - [`clock`], [`stats`]: time stamps and latency percentiles.
+//! - [`codes`]: the codes they carry, each enum declared once with its code and label.
+//!
+//! The runtime that stages share (configuration, iceoryx2 helpers, the stage skeleton) is the
+//! `hvs-runtime` crate.
 
-pub mod clock;
-pub mod config;
-pub mod ipc;
+pub mod codes;
 pub mod messages;
-pub mod stage;
-pub mod stats;
 pub mod topics;
-
-/// Formats an error with its chain of causes (`outer: cause: root`), skipping a cause whose text
-/// the message already contains (many errors quote their cause in their own message).
-pub fn error_chain(error: &(dyn std::error::Error + 'static)) -> String {
-    let mut message = error.to_string();
-    let mut source = error.source();
-    while let Some(cause) = source {
-        let text = cause.to_string();
-        if !message.contains(&text) {
-            message.push_str(": ");
-            message.push_str(&text);
-        }
-        source = cause.source();
-    }
-    message
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[derive(Debug, thiserror::Error)]
-    #[error("cannot read map {path}: {source}")]
-    struct Quoting {
-        path: String,
-        source: std::io::Error,
-    }
-
-    #[derive(Debug, thiserror::Error)]
-    #[error("starting the sim")]
-    struct Outer(#[source] Quoting);
-
-    #[test]
-    fn error_chain_skips_causes_already_quoted() {
-        let e = Outer(Quoting {
-            path: "m.txt".into(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        });
-        assert_eq!(
-            error_chain(&e),
-            "starting the sim: cannot read map m.txt: no such file"
-        );
-    }
-}

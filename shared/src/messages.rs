@@ -13,6 +13,11 @@
 use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
 
+pub use crate::codes::{
+    ControlCommand, FrameSource, IntersectionType, MotionCommand, RangeSource, RowAlignState,
+    SendReason, StageHealth, StageState, StereoAlgorithm,
+};
+
 /// Width of the fast-path (low-resolution) images in pixels.
 pub const LO_WIDTH: usize = 320;
 /// Height of the fast-path (low-resolution) images in pixels.
@@ -61,33 +66,6 @@ pub fn decode_name(bytes: &[u8]) -> &str {
 pub trait Sequenced {
     /// The sequence number of this sample.
     fn sequence(&self) -> u64;
-}
-
-/// Where a frame pair came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum FrameSource {
-    /// Rendered by the built-in simulator.
-    Simulator = 1,
-    /// Two V4L2 devices (the Minoru webcam).
-    V4l2 = 2,
-    /// A folder of left/right PNG pairs.
-    Files = 3,
-    /// An MCAP recording being replayed.
-    Replay = 4,
-}
-
-impl FrameSource {
-    /// Decodes a `source` code; `None` for unknown codes.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            1 => Some(Self::Simulator),
-            2 => Some(Self::V4l2),
-            3 => Some(Self::Files),
-            4 => Some(Self::Replay),
-            _ => None,
-        }
-    }
 }
 
 /// Header of a stereo frame pair (72 bytes).
@@ -191,59 +169,6 @@ stereo_frame!(
     "A 640x480 grey stereo pair: the long-range path (614 472 bytes)."
 );
 
-/// Stereo algorithms (the `algorithm` code of a [`DisparityHeader`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-#[repr(u32)]
-pub enum StereoAlgorithm {
-    /// Block matching, sum of absolute differences.
-    BmSad = 1,
-    /// Block matching, sum of squared differences.
-    BmSsd = 2,
-    /// Block matching, normalised cross-correlation.
-    BmNcc = 3,
-    /// Block matching, census transform + Hamming distance.
-    BmCensus = 4,
-    /// Ogale & Aloimonos shape-and-stereo correspondence.
-    Ogale = 5,
-    /// Census cost + semi-global matching.
-    Sgm = 6,
-}
-
-impl StereoAlgorithm {
-    /// Every algorithm, in code order.
-    pub const ALL: [StereoAlgorithm; 6] = [
-        Self::BmSad,
-        Self::BmSsd,
-        Self::BmNcc,
-        Self::BmCensus,
-        Self::Ogale,
-        Self::Sgm,
-    ];
-
-    /// Decodes an `algorithm` code; `None` for unknown codes.
-    pub fn from_code(code: u32) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| *a as u32 == code)
-    }
-
-    /// The name used in config files and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::BmSad => "bm-sad",
-            Self::BmSsd => "bm-ssd",
-            Self::BmNcc => "bm-ncc",
-            Self::BmCensus => "bm-census",
-            Self::Ogale => "ogale",
-            Self::Sgm => "sgm",
-        }
-    }
-
-    /// Parses a config/CLI name such as `bm-sad`.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| a.name() == name)
-    }
-}
-
 /// Header of a disparity map (64 bytes).
 #[repr(C)]
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
@@ -276,43 +201,6 @@ pub struct DisparityHeader {
     pub row_shift_mpx: i32,
     /// [`RowAlignState`] code.
     pub row_align: u32,
-}
-
-/// What the row alignment of a disparity map did (the `row_align` of a [`DisparityHeader`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum RowAlignState {
-    /// Off (`row_align.enabled = false`), or not a stereo stage's map.
-    Off = 0,
-    /// On, no estimate yet (an untextured view so far).
-    Searching = 1,
-    /// Tracked, below the smallest offset worth applying: the right image was used as is.
-    Aligned = 2,
-    /// Tracked and applied to the right image before matching.
-    Corrected = 3,
-}
-
-impl RowAlignState {
-    /// Decodes a code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            0 => Some(Self::Off),
-            1 => Some(Self::Searching),
-            2 => Some(Self::Aligned),
-            3 => Some(Self::Corrected),
-            _ => None,
-        }
-    }
-
-    /// Lower-case label.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Off => "off",
-            Self::Searching => "searching",
-            Self::Aligned => "aligned",
-            Self::Corrected => "corrected",
-        }
-    }
 }
 
 macro_rules! disparity_map {
@@ -365,29 +253,6 @@ disparity_map!(
     HI_HEIGHT,
     "Disparity of the long-range path's left image (614 464 bytes)."
 );
-
-/// Which stereo path a range came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum RangeSource {
-    /// No valid pixels in the window.
-    None = 0,
-    /// The 320x240 fast path.
-    Lo = 1,
-    /// The 640x480 long-range path.
-    Hi = 2,
-}
-
-impl RangeSource {
-    /// Decodes a `source` code (unknown codes read as `None`).
-    pub fn from_code(code: u32) -> Self {
-        match code {
-            1 => Self::Lo,
-            2 => Self::Hi,
-            _ => Self::None,
-        }
-    }
-}
 
 /// The range seen in one vertical window of the image (24 bytes).
 #[repr(C)]
@@ -481,106 +346,6 @@ impl Sequenced for RangeReport {
     }
 }
 
-/// Motion commands the decision stage can give.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u32)]
-pub enum MotionCommand {
-    /// Neutral pulses: wheels stopped.
-    Stop = 0,
-    /// Drive straight ahead.
-    Forward = 1,
-    /// Turn left.
-    Left = 2,
-    /// Turn right.
-    Right = 3,
-    /// Back up.
-    Reverse = 4,
-}
-
-impl MotionCommand {
-    /// Decodes a command code; unknown codes read as `Stop` (the safe choice).
-    pub fn from_code(code: u32) -> Self {
-        match code {
-            1 => Self::Forward,
-            2 => Self::Left,
-            3 => Self::Right,
-            4 => Self::Reverse,
-            _ => Self::Stop,
-        }
-    }
-
-    /// Short upper-case label for status lines.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Stop => "STOP",
-            Self::Forward => "FWD",
-            Self::Left => "LEFT",
-            Self::Right => "RIGHT",
-            Self::Reverse => "REV",
-        }
-    }
-}
-
-/// Intersection types of the reference navigation table.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u32)]
-pub enum IntersectionType {
-    /// Not enough information.
-    Unknown = 0,
-    /// Walls left, front and right.
-    DeadEnd = 1,
-    /// Walls left and front: the way continues right.
-    RightTurn = 2,
-    /// Walls front and right: the way continues left.
-    LeftTurn = 3,
-    /// Wall in front only: branches left and right.
-    TBottom = 4,
-    /// Walls left and right: a straight hallway.
-    StraightHallway = 5,
-    /// Wall on the right only: branch left, straight continues.
-    TWallRight = 6,
-    /// Wall on the left only: branch right, straight continues.
-    TWallLeft = 7,
-    /// The reference's "B intersection".
-    BIntersection = 8,
-    /// No walls: four-way crossing.
-    XIntersection = 9,
-}
-
-impl IntersectionType {
-    /// Decodes a code; unknown codes read as `Unknown`.
-    pub fn from_code(code: u32) -> Self {
-        match code {
-            1 => Self::DeadEnd,
-            2 => Self::RightTurn,
-            3 => Self::LeftTurn,
-            4 => Self::TBottom,
-            5 => Self::StraightHallway,
-            6 => Self::TWallRight,
-            7 => Self::TWallLeft,
-            8 => Self::BIntersection,
-            9 => Self::XIntersection,
-            _ => Self::Unknown,
-        }
-    }
-
-    /// Short label for status lines.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Unknown => "unknown",
-            Self::DeadEnd => "dead-end",
-            Self::RightTurn => "right-turn",
-            Self::LeftTurn => "left-turn",
-            Self::TBottom => "T-bottom",
-            Self::StraightHallway => "hallway",
-            Self::TWallRight => "T-wall-right",
-            Self::TWallLeft => "T-wall-left",
-            Self::BIntersection => "B",
-            Self::XIntersection => "X",
-        }
-    }
-}
-
 /// One navigation decision per fast-path frame (64 bytes).
 #[repr(C)]
 #[derive(Debug, Default, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
@@ -615,61 +380,6 @@ pub struct Decision {
 impl Sequenced for Decision {
     fn sequence(&self) -> u64 {
         self.frame_id
-    }
-}
-
-/// Why the actuator sent what it sent.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum SendReason {
-    /// A fresh decision.
-    Decision = 1,
-    /// Neutral: no fresh decision within the watchdog bound.
-    WatchdogNeutral = 2,
-    /// Neutral: the stage is shutting down.
-    ShutdownNeutral = 3,
-    /// Neutral: an internal error.
-    ErrorNeutral = 4,
-    /// Neutral: sent once when the link comes up.
-    StartupNeutral = 5,
-}
-
-impl SendReason {
-    /// Decodes a reason code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            1 => Some(Self::Decision),
-            2 => Some(Self::WatchdogNeutral),
-            3 => Some(Self::ShutdownNeutral),
-            4 => Some(Self::ErrorNeutral),
-            5 => Some(Self::StartupNeutral),
-            _ => None,
-        }
-    }
-
-    /// Every reason.
-    pub const ALL: [Self; 5] = [
-        Self::Decision,
-        Self::WatchdogNeutral,
-        Self::ShutdownNeutral,
-        Self::ErrorNeutral,
-        Self::StartupNeutral,
-    ];
-
-    /// Lower-case label (`hvs probe echo`, recordings).
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Decision => "decision",
-            Self::WatchdogNeutral => "watchdog-neutral",
-            Self::ShutdownNeutral => "shutdown-neutral",
-            Self::ErrorNeutral => "error-neutral",
-            Self::StartupNeutral => "startup-neutral",
-        }
-    }
-
-    /// True for every neutral (stop) reason.
-    pub fn is_neutral(self) -> bool {
-        !matches!(self, Self::Decision)
     }
 }
 
@@ -710,43 +420,6 @@ pub struct ActuatorReport {
 impl Sequenced for ActuatorReport {
     fn sequence(&self) -> u64 {
         self.seq
-    }
-}
-
-/// Liveness state a stage reports about itself.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum StageHealth {
-    /// Opening devices and services.
-    Starting = 1,
-    /// Working normally.
-    Running = 2,
-    /// Running but impaired (for example a device is missing and being retried).
-    Degraded = 3,
-    /// Shutting down.
-    Stopping = 4,
-}
-
-impl StageHealth {
-    /// Decodes a state code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            1 => Some(Self::Starting),
-            2 => Some(Self::Running),
-            3 => Some(Self::Degraded),
-            4 => Some(Self::Stopping),
-            _ => None,
-        }
-    }
-
-    /// Lower-case label.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Starting => "starting",
-            Self::Running => "running",
-            Self::Degraded => "degraded",
-            Self::Stopping => "stopping",
-        }
     }
 }
 
@@ -834,55 +507,6 @@ impl Sequenced for SimTruth {
     }
 }
 
-/// Supervisor-side state of a stage.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum StageState {
-    /// Not running and not going to be started.
-    Stopped = 1,
-    /// Spawned, no heartbeat yet.
-    Starting = 2,
-    /// Beating.
-    Running = 3,
-    /// Waiting out a restart backoff.
-    Backoff = 4,
-    /// Restarted too often: given up.
-    Failed = 5,
-    /// Disabled in the config.
-    Disabled = 6,
-    /// Being stopped.
-    Stopping = 7,
-}
-
-impl StageState {
-    /// Decodes a state code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            1 => Some(Self::Stopped),
-            2 => Some(Self::Starting),
-            3 => Some(Self::Running),
-            4 => Some(Self::Backoff),
-            5 => Some(Self::Failed),
-            6 => Some(Self::Disabled),
-            7 => Some(Self::Stopping),
-            _ => None,
-        }
-    }
-
-    /// Lower-case label.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Stopped => "stopped",
-            Self::Starting => "starting",
-            Self::Running => "running",
-            Self::Backoff => "backoff",
-            Self::Failed => "failed",
-            Self::Disabled => "disabled",
-            Self::Stopping => "stopping",
-        }
-    }
-}
-
 /// One stage as the supervisor sees it (96 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
@@ -951,27 +575,6 @@ pub struct SupervisorStatus {
 impl Sequenced for SupervisorStatus {
     fn sequence(&self) -> u64 {
         self.seq
-    }
-}
-
-/// Requests to the supervisor from `hvs restart` / `hvs stop`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum ControlCommand {
-    /// Replace one stage in place.
-    Restart = 1,
-    /// Orderly stop of the whole pipeline.
-    Stop = 2,
-}
-
-impl ControlCommand {
-    /// Decodes a command code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        match code {
-            1 => Some(Self::Restart),
-            2 => Some(Self::Stop),
-            _ => None,
-        }
     }
 }
 
@@ -1048,20 +651,5 @@ mod tests {
         assert_eq!(decode_name(&n), "aé");
         let n: [u8; 2] = encode_name("aé");
         assert_eq!(decode_name(&n), "a");
-    }
-
-    #[test]
-    fn codes_round_trip() {
-        for a in StereoAlgorithm::ALL {
-            assert_eq!(StereoAlgorithm::from_code(a as u32), Some(a));
-            assert_eq!(StereoAlgorithm::from_name(a.name()), Some(a));
-        }
-        for c in 0..5 {
-            assert_eq!(MotionCommand::from_code(c) as u32, c);
-        }
-        assert_eq!(MotionCommand::from_code(99), MotionCommand::Stop);
-        for c in 0..10 {
-            assert_eq!(IntersectionType::from_code(c) as u32, c);
-        }
     }
 }

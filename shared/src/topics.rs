@@ -210,6 +210,17 @@ impl Stage {
     }
 }
 
+/// The names of the stages the supervisor knows, in start order ([`Stage::ALL`]'s names).
+pub const STAGE_NAMES: [&str; 7] = {
+    let mut names = [""; 7];
+    let mut i = 0;
+    while i < 7 {
+        names[i] = Stage::ALL[i].name();
+        i += 1;
+    }
+    names
+};
+
 impl core::fmt::Display for Stage {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.write_str(self.name())
@@ -228,7 +239,7 @@ pub struct StageInput {
 }
 
 /// The inputs each stage cannot work without (the table above, read as a graph): the
-/// pre-start check ([`HvsConfig::validate`](crate::config::HvsConfig::validate)) refuses a
+/// pre-start check (`hvs_runtime::config::HvsConfig::validate`) refuses a
 /// config in which an enabled stage waits on a topic that no enabled stage publishes.
 /// Capture reads `sim/camera/640x480` only with `capture.source = "sim"`, and publishes
 /// `frames/640x480` only at a 640x480 capture size; fusion also takes the 640x480 results
@@ -311,7 +322,7 @@ pub enum TopicByPath {
 }
 
 /// Looks a topic up by its path below `hvs/<instance>/` (one of [`ALL_TOPIC_PATHS`], or
-/// `heartbeat/<stage>` for a stage of [`STAGE_NAMES`](crate::config::STAGE_NAMES)).
+/// `heartbeat/<stage>` for a stage of [`STAGE_NAMES`]).
 pub fn topic_by_path(path: &str) -> Option<TopicByPath> {
     use TopicByPath as T;
     Some(match path {
@@ -329,9 +340,7 @@ pub fn topic_by_path(path: &str) -> Option<TopicByPath> {
         p if p == SUPERVISOR_CONTROL.path => T::ControlRequest(&SUPERVISOR_CONTROL),
         p => {
             let stage = p.strip_prefix(HEARTBEAT.path)?.strip_prefix('/')?;
-            let stage = crate::config::STAGE_NAMES
-                .into_iter()
-                .find(|s| *s == stage)?;
+            let stage = STAGE_NAMES.into_iter().find(|s| *s == stage)?;
             T::StageHeartbeat(&HEARTBEAT, stage)
         }
     })
@@ -344,7 +353,7 @@ pub fn known_topic_paths() -> Vec<String> {
         .iter()
         .map(|(p, _)| (*p).to_string())
         .chain(
-            crate::config::STAGE_NAMES
+            STAGE_NAMES
                 .iter()
                 .map(|s| format!("{}/{s}", HEARTBEAT.path)),
         )

@@ -14,10 +14,10 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::ipc::IpcNode;
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::ipc::IpcNode;
+use hvs_runtime::stats::{LatencySummary, summarize};
 use hvs_shared::messages::{FrameHeader, Sequenced, StereoFrame320x240, StereoFrame640x480};
-use hvs_shared::stats::{LatencySummary, summarize};
 use hvs_shared::topics::{self, Topic};
 use serde::{Deserialize, Serialize};
 

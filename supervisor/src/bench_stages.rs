@@ -5,7 +5,7 @@
 use anyhow::{Context, Result};
 use hvs_decision::Navigator;
 use hvs_fusion::{Canny, FusionPath, sobel_edges};
-use hvs_shared::config::HvsConfig;
+use hvs_runtime::config::HvsConfig;
 use hvs_shared::messages::{MAX_RANGE_WINDOWS, RangeSource, RangeWindow};
 use hvs_sim::{GridMap, SimConfig, SimWorld, StereoRig};
 use hvs_stereo::{ImageView, matcher_for};

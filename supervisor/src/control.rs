@@ -4,8 +4,8 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use hvs_shared::config::STAGE_NAMES;
-use hvs_shared::ipc::{IpcNode, TopicOpenError, TopicPublisher, TopicSubscriber};
+use hvs_runtime::config::STAGE_NAMES;
+use hvs_runtime::ipc::{IpcNode, TopicOpenError, TopicPublisher, TopicSubscriber};
 use hvs_shared::messages::{
     ControlCommand, ControlRequest, MotionCommand, NAME_LEN, StageHealth, StageState,
     SupervisorStatus, decode_name, encode_name,

@@ -14,7 +14,7 @@ use hvs_capture::v4l2::camera::open_capture_node;
 use hvs_capture::v4l2::{
     CameraMode, DeviceOpener, KernelOpener, OpenError, StereoCamera, StereoSpec,
 };
-use hvs_shared::config::{CaptureSource, HvsConfig};
+use hvs_runtime::config::{CaptureSource, HvsConfig};
 use hvs_shared::messages::{
     DisparityMap320x240, DisparityMap640x480, StereoFrame320x240, StereoFrame640x480,
 };
@@ -434,7 +434,7 @@ fn shm_check() -> Check {
 }
 
 fn leftover_checks(config: Option<&HvsConfig>) -> Vec<Check> {
-    let mut checks = vec![match hvs_shared::ipc::dead_nodes() {
+    let mut checks = vec![match hvs_runtime::ipc::dead_nodes() {
         Ok(0) => Check::ok("iceoryx2", "no leftovers of a dead run"),
         Ok(n) => Check::bad(
             Verdict::Warn,
@@ -468,7 +468,7 @@ fn leftover_checks(config: Option<&HvsConfig>) -> Vec<Check> {
 
 /// The pid of a live supervisor of the config's instance (from its lock file).
 fn running_supervisor(c: &HvsConfig) -> Option<i32> {
-    let lock = hvs_shared::config::run_dir(&c.instance).join("supervisor.lock");
+    let lock = hvs_runtime::config::run_dir(&c.instance).join("supervisor.lock");
     let pid = std::fs::read_to_string(lock)
         .ok()?
         .trim()

@@ -16,7 +16,7 @@ use anyhow::{Context, Result, bail};
 use hvs_actuator::commander::{Commander, DecisionInput};
 use hvs_decision::Navigator;
 use hvs_fusion::FusionPath;
-use hvs_shared::config::HvsConfig;
+use hvs_runtime::config::HvsConfig;
 use hvs_shared::messages::{IntersectionType, MotionCommand, RangeSource};
 use hvs_sim::{GridMap, Pose, SimConfig, SimWorld, lock_psc};
 use hvs_stereo::{ImageView, matcher_for};

@@ -20,7 +20,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
-use hvs_shared::config::HvsConfig;
+use hvs_runtime::config::HvsConfig;
 
 /// hvs: a hybrid stereo-vision system that drives a small robot down hallways.
 #[derive(Debug, Parser)]
@@ -469,7 +469,7 @@ fn seconds(s: f64, what: &str) -> anyhow::Result<Duration> {
 }
 
 fn main() -> ExitCode {
-    hvs_shared::stage::init_tracing();
+    hvs_runtime::stage::init_tracing();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run {
@@ -659,7 +659,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             let e: &(dyn std::error::Error + 'static) = e.as_ref();
-            eprintln!("hvs: error: {}", hvs_shared::error_chain(e));
+            eprintln!("hvs: error: {}", hvs_runtime::error_chain(e));
             ExitCode::FAILURE
         }
     }

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use hvs_shared::config::{RestartPolicy, StageSpec};
+use hvs_runtime::config::{RestartPolicy, StageSpec};
 use hvs_shared::messages::StageState;
 
 /// A stage that ran this long without trouble gets its backoff reset.

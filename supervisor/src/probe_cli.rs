@@ -8,7 +8,7 @@ use anyhow::Context;
 use hvs_probe::attach::{self, list_json, render_list};
 use hvs_probe::record::{self, RecordOptions};
 use hvs_probe::{EchoOptions, HzOptions, Probe, SnapshotOptions, TopOptions};
-use hvs_shared::config::HvsConfig;
+use hvs_runtime::config::HvsConfig;
 
 use crate::{Target, default_config, seconds};
 

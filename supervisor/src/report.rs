@@ -1,6 +1,6 @@
 //! The JSON report `hvs run --report F` writes at the end of a run.
 
-use hvs_shared::stats::LatencySummary;
+use hvs_runtime::stats::LatencySummary;
 use serde::Serialize;
 
 /// Latency percentiles in milliseconds.

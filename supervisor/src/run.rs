@@ -14,15 +14,15 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use bytemuck::Zeroable;
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::{CaptureSource, HvsConfig, StageSpec, run_dir};
-use hvs_shared::ipc::{IpcNode, TopicPublisher, TopicSubscriber};
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::{CaptureSource, HvsConfig, StageSpec, run_dir};
+use hvs_runtime::ipc::{IpcNode, TopicPublisher, TopicSubscriber};
+use hvs_runtime::stats::LatencyWindow;
 use hvs_shared::messages::{
     ActuatorReport, ControlCommand, Decision, MAX_STAGES, MotionCommand, NOTE_LEN, SendReason,
     SimTruth, StageHealth, StageHeartbeat, StageState, StageStatusEntry, SupervisorStatus,
     decode_name, encode_name,
 };
-use hvs_shared::stats::LatencyWindow;
 use hvs_shared::topics::{self, Stage};
 use nix::sys::signal::Signal;
 
@@ -263,7 +263,7 @@ fn resolve_program(bin_dir: &Path, program: &str) -> PathBuf {
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     let mut config = HvsConfig::load(&opts.config_path)?;
     if let Some(instance) = &opts.instance {
-        hvs_shared::config::validate_instance_name(instance)
+        hvs_runtime::config::validate_instance_name(instance)
             .map_err(|m| anyhow::anyhow!("--instance {m}"))?;
         config.instance = instance.clone();
     }

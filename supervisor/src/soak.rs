@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use hvs_shared::config::run_dir;
+use hvs_runtime::config::run_dir;
 
 use crate::control;
 use crate::procstat::{self, mib};
@@ -56,7 +56,7 @@ fn hvs_command(exe: &Path) -> Command {
 
 /// Shared-memory and iceoryx2 files of this machine.
 fn iceoryx_files() -> std::collections::BTreeSet<String> {
-    hvs_shared::ipc::iceoryx_files().into_iter().collect()
+    hvs_runtime::ipc::iceoryx_files().into_iter().collect()
 }
 
 fn fd_count(pid: u32) -> usize {

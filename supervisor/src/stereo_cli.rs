@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use hvs_shared::config::{HvsConfig, StereoConfig};
+use hvs_runtime::config::{HvsConfig, StereoConfig};
 use hvs_shared::messages::StereoAlgorithm;
 use hvs_stereo::eval::{self, Degradation, Scene, SceneResult, Score};
 use hvs_stereo::{ImageView, matcher_for};
@@ -54,8 +54,8 @@ impl StereoBase {
 
 /// Parses an algorithm name, listing the valid ones on error.
 pub fn parse_algorithm(name: &str) -> anyhow::Result<StereoAlgorithm> {
-    StereoAlgorithm::from_name(name).with_context(|| {
-        let names: Vec<&str> = StereoAlgorithm::ALL.iter().map(|a| a.name()).collect();
+    StereoAlgorithm::from_label(name).with_context(|| {
+        let names: Vec<&str> = StereoAlgorithm::ALL.iter().map(|a| a.label()).collect();
         format!(
             "unknown stereo algorithm {name:?}; choose one of {}",
             names.join(", ")
@@ -113,7 +113,7 @@ pub fn stereo(
     println!(
         "wrote {}: {lw}x{lh}, {} disparities {}..{}, {:.1}% valid, {ms:.1} ms",
         out.display(),
-        cfg.algorithm.name(),
+        cfg.algorithm.label(),
         cfg.min_disp,
         cfg.max_disp,
         100.0 * stats.valid_px as f64 / (lw * lh).max(1) as f64
@@ -254,17 +254,17 @@ pub fn eval(opts: &EvalOptions, base: &StereoBase) -> anyhow::Result<()> {
             };
             for s in &prepared {
                 if progress {
-                    eprint!("\r{:<10} {:<9} {:<12}", algo.name(), condition, s.name);
+                    eprint!("\r{:<10} {:<9} {:<12}", algo.label(), condition, s.name);
                 }
                 let r = eval::evaluate(&cfg, s, opts.repeat)?;
                 if let Some(dir) = &opts.save {
                     std::fs::create_dir_all(dir)
                         .with_context(|| format!("cannot create {}", dir.display()))?;
-                    let path = dir.join(format!("{}-{}-{condition}.png", s.name, algo.name()));
+                    let path = dir.join(format!("{}-{}-{condition}.png", s.name, algo.label()));
                     eval::write_disparity_png(&path, &r.estimate_q8, s.width, s.height)?;
                 }
                 rows.push(Row {
-                    algorithm: algo.name().to_string(),
+                    algorithm: algo.label().to_string(),
                     condition: condition.to_string(),
                     result: r,
                 });
@@ -493,7 +493,7 @@ pub fn bench(
             let median = pick(0.5);
             let evals = (w * h) as f64 * (max_disp - min_disp + 1) as f64;
             let row = BenchRow {
-                algorithm: a.name().to_string(),
+                algorithm: a.label().to_string(),
                 width: w,
                 height: h,
                 min_disp,

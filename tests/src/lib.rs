@@ -332,4 +332,4 @@ pub fn signal_pid(pid: u32, signal: Signal) {
 
 pub mod psc_peer;
 
-pub use hvs_shared::ipc::iceoryx_files;
+pub use hvs_runtime::ipc::iceoryx_files;

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use hvs_capture::calib::{StereoCalibration, StereoRectifier};
 use hvs_capture::replay::ReplayIndex;
-use hvs_shared::config::HvsConfig;
+use hvs_runtime::config::HvsConfig;
 use hvs_sim::GridMap;
 use hvs_sim::psc::PscParser;
 use hvs_tests::repo_root;

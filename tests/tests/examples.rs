@@ -1,6 +1,7 @@
 //! The examples a client of its own starts from, run against the simulator: each must read
 //! what the pipeline publishes. (`shared/examples/read_decisions.rs`: plain iceoryx2 and the
-//! contract's types.)
+//! contract's types; `shared/examples/read_decisions.py`: the iceoryx2 Python bindings and a
+//! ctypes structure written from docs/ipc.md.)
 
 use std::process::Command;
 use std::time::Duration;
@@ -25,27 +26,51 @@ fn example(name: &str) -> std::path::PathBuf {
     path
 }
 
-#[test]
-fn the_rust_reader_reads_decisions_from_a_running_pipeline() {
-    let exe = example("read_decisions");
-    let p = Pipeline::start("example-rust", &[], "");
-    p.wait_all_running(START);
-    let out = Command::new(&exe)
-        .args(["--instance", &p.instance, "--count", "5"])
-        .output()
-        .expect("run the example");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+/// A Python 3 that imports iceoryx2 0.10: `HVS_PYTHON` if set, else `python3` with PyPI's
+/// `iceoryx2==0.10.0` installed once under `target/py-iceoryx2` (pip, from PyPI).
+fn python_with_iceoryx2() -> (String, std::path::PathBuf) {
+    let python = std::env::var("HVS_PYTHON").unwrap_or_else(|_| "python3".to_string());
+    let site = repo_root().join("target").join("py-iceoryx2");
+    let imports = |python: &str| {
+        Command::new(python)
+            .args(["-c", "import iceoryx2"])
+            .env("PYTHONPATH", &site)
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if !imports(&python) {
+        let out = Command::new(&python)
+            .args([
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--disable-pip-version-check",
+            ])
+            .arg("--target")
+            .arg(&site)
+            .arg("iceoryx2==0.10.0")
+            .output()
+            .unwrap_or_else(|e| panic!("cannot run {python}: {e} (set HVS_PYTHON)"));
+        assert!(
+            out.status.success(),
+            "pip install iceoryx2==0.10.0 into {} failed: {}",
+            site.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(imports(&python), "iceoryx2 installed but not importable");
+    }
+    (python, site)
+}
+
+/// Checks the reader's lines: five frames, a real command label, the default policy (2,
+/// fuzzy), frame ids increasing.
+fn check_reader_output(text: &str) {
     let ids: Vec<u64> = text
         .lines()
         .map(|l| {
             let f: Vec<&str> = l.split_whitespace().collect();
             assert_eq!(f[0], "frame", "{l}");
-            // A real command label and the default policy's code (2, fuzzy).
             assert!(
                 ["STOP", "FWD", "LEFT", "RIGHT", "REV"].contains(&f[3]),
                 "{l}"
@@ -56,13 +81,55 @@ fn the_rust_reader_reads_decisions_from_a_running_pipeline() {
         .collect();
     assert_eq!(ids.len(), 5, "{text}");
     assert!(ids.windows(2).all(|w| w[1] > w[0]), "{ids:?}");
+}
+
+/// Runs a reader against a running pipeline and against an instance that does not exist.
+fn check_reader(mut reader: impl FnMut(&str) -> std::process::Output, tag: &str) {
+    let p = Pipeline::start(tag, &[], "");
+    p.wait_all_running(START);
+    let out = reader(&p.instance);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    check_reader_output(&text);
     // A pipeline that is not there is named.
-    let out = Command::new(&exe)
-        .args(["--instance", "no-such-instance", "--count", "1"])
-        .output()
-        .expect("run the example");
+    let out = reader("no-such-instance");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("hvs/no-such-instance/decisions"), "{err}");
     println!("{text}");
+}
+
+#[test]
+fn the_rust_reader_reads_decisions_from_a_running_pipeline() {
+    let exe = example("read_decisions");
+    check_reader(
+        |instance| {
+            Command::new(&exe)
+                .args(["--instance", instance, "--count", "5"])
+                .output()
+                .expect("run the example")
+        },
+        "example-rust",
+    );
+}
+
+#[test]
+fn the_python_reader_reads_decisions_from_a_running_pipeline() {
+    let (python, site) = python_with_iceoryx2();
+    let script = repo_root().join("shared/examples/read_decisions.py");
+    check_reader(
+        |instance| {
+            Command::new(&python)
+                .arg(&script)
+                .args(["--instance", instance, "--count", "5"])
+                .env("PYTHONPATH", &site)
+                .output()
+                .expect("run the Python example")
+        },
+        "example-py",
+    );
 }

@@ -7,7 +7,7 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use hvs_shared::ipc::{IpcNode, TopicSubscriber};
+use hvs_runtime::ipc::{IpcNode, TopicSubscriber};
 use hvs_shared::messages::{ActuatorReport, Decision, MotionCommand, SendReason};
 use hvs_shared::topics;
 use hvs_tests::{
@@ -17,7 +17,7 @@ use hvs_tests::{
 use nix::sys::signal::Signal;
 
 const START: Duration = Duration::from_secs(60);
-const STAGES: [&str; 7] = hvs_shared::config::STAGE_NAMES;
+const STAGES: [&str; 7] = hvs_runtime::config::STAGE_NAMES;
 /// How long after a fault the decisions must flow again (the bound the tests hold; the
 /// measured times are printed).
 const RESUME_BOUND: Duration = Duration::from_secs(6);

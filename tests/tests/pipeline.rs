@@ -2,7 +2,7 @@
 
 use std::time::{Duration, Instant};
 
-use hvs_shared::ipc::IpcNode;
+use hvs_runtime::ipc::IpcNode;
 use hvs_shared::messages::{MotionCommand, RowAlignState, SendReason};
 use hvs_shared::topics;
 use hvs_tests::{Pipeline, hvs, iceoryx_files, pid_of, signal_pid, stage, write_config};
@@ -10,7 +10,7 @@ use nix::sys::signal::Signal;
 
 const START: Duration = Duration::from_secs(60);
 /// Every stage of the default (simulator) pipeline.
-const STAGES: [&str; 7] = hvs_shared::config::STAGE_NAMES;
+const STAGES: [&str; 7] = hvs_runtime::config::STAGE_NAMES;
 
 /// Newest decision frame id seen on the pipeline's own topic within `window`.
 fn newest_decision(node: &IpcNode, window: Duration) -> Option<u64> {

@@ -4,7 +4,7 @@
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use hvs_shared::ipc::IpcNode;
+use hvs_runtime::ipc::IpcNode;
 use hvs_shared::topics;
 use hvs_tests::{Pipeline, bin, hvs, hvs_ok, stages, unique_instance};
 use nix::sys::signal::{Signal, kill};
@@ -342,7 +342,7 @@ fn probe_commands_show_a_running_pipeline() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains(&format!("instance {instance}")), "{text}");
     assert!(text.contains("last decision #"), "{text}");
-    for stage in hvs_shared::config::STAGE_NAMES {
+    for stage in hvs_runtime::config::STAGE_NAMES {
         assert!(
             text.lines()
                 .any(|l| l.starts_with(&format!("{stage} ")) && l.contains("running")),

@@ -6,7 +6,7 @@
 //! bound it sends neutral instead: the Sabertooth in microcontroller mode has no signal-loss
 //! timeout, so without this the robot would keep driving on a stale command.
 
-use hvs_shared::config::{ActuatorConfig, PulsePair};
+use hvs_runtime::config::{ActuatorConfig, PulsePair};
 use hvs_shared::messages::{MotionCommand, SendReason};
 
 use crate::psc::{self, COMMAND_LEN, MAX_PULSE, MAX_RAMP, MIN_PULSE};
@@ -64,7 +64,7 @@ pub struct Commander {
 }
 
 /// Clamps a pulse pair to the PSC range and to the span of the configured motion table.
-fn clamp_pulses(table: &hvs_shared::config::PulseTable, pair: PulsePair) -> PulsePair {
+fn clamp_pulses(table: &hvs_runtime::config::PulseTable, pair: PulsePair) -> PulsePair {
     let all = [
         table.neutral,
         table.forward,

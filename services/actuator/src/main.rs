@@ -10,11 +10,11 @@ use std::time::{Duration, Instant};
 
 use hvs_actuator::link::{LinkEvent, LinkSettings};
 use hvs_actuator::{Commander, DecisionInput, Outgoing, PscLink};
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::sim_pty_path;
-use hvs_shared::ipc::TopicPublisher;
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::sim_pty_path;
+use hvs_runtime::ipc::TopicPublisher;
+use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{ActuatorReport, MotionCommand, SendReason, StageHealth};
-use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 
 /// How often the actuator wakes to check the watchdog and the wire.

@@ -24,14 +24,14 @@ use hvs_capture::downscale_2x;
 use hvs_capture::files::FileSource;
 use hvs_capture::replay::{ReplayEvent, ReplayFrame, ReplayIndex, ReplayPair};
 use hvs_capture::v4l2::{CameraMode, StereoCamera, StereoSpec};
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::CaptureSource;
-use hvs_shared::ipc::TopicPublisher;
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::CaptureSource;
+use hvs_runtime::ipc::TopicPublisher;
+use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, LO_HEIGHT, LO_WIDTH, StageHealth,
     StereoFrame320x240, StereoFrame640x480,
 };
-use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 
 fn main() -> ExitCode {

@@ -1,7 +1,7 @@
 //! hvs decision: from ranges per window to walls, the intersection type of the reference
 //! navigation table, and a motion command, with no IPC.
 //!
-//! Policies ([`hvs_shared::config::DecisionPolicy`]):
+//! Policies ([`hvs_runtime::config::DecisionPolicy`]):
 //! * `reference`: crisp thresholds `a` (sides) and `b` (front), the navigation table's first
 //!   option, a new command every frame, no memory (the thesis);
 //! * `fuzzy` (default): wall memberships with a fuzzy band around the thresholds and a corridor
@@ -22,7 +22,7 @@ pub mod odometry;
 use std::cell::Cell;
 use std::collections::{HashMap, HashSet};
 
-use hvs_shared::config::{DecisionConfig, DecisionPolicy, PulseTable, WallThresholds};
+use hvs_runtime::config::{DecisionConfig, DecisionPolicy, PulseTable, WallThresholds};
 use hvs_shared::messages::{
     IntersectionType, MotionCommand, ObstacleScan, RangeSource, RangeWindow,
 };
@@ -1536,7 +1536,7 @@ impl Navigator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hvs_shared::config::M_PER_FT;
+    use hvs_runtime::config::M_PER_FT;
 
     fn reference_thresholds() -> WallThresholds {
         WallThresholds {

@@ -9,9 +9,9 @@ use std::collections::VecDeque;
 use std::process::ExitCode;
 
 use hvs_decision::{Navigator, Policy};
-use hvs_shared::clock::monotonic_ns;
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{ActuatorReport, Decision};
-use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 
 fn main() -> ExitCode {

@@ -9,7 +9,7 @@
 //! `v = (vl + vr) / 2`, `w = (vr - vl) / track`. Without wheel encoders this is the best the
 //! robot knows about where it went; the visit memory and the turn execution use it.
 
-use hvs_shared::config::{OdometryConfig, PulseTable};
+use hvs_runtime::config::{OdometryConfig, PulseTable};
 
 /// PSC pulse range, 2 us units.
 const PW_SPAN: f64 = 1000.0;

@@ -3,7 +3,7 @@
 
 pub mod canny;
 
-use hvs_shared::config::RangeStatistic;
+use hvs_runtime::config::RangeStatistic;
 use hvs_shared::messages::{
     DISPARITY_SCALE, MAX_RANGE_WINDOWS, ObstacleScan, RangeSource, RangeWindow, SCAN_BINS,
 };
@@ -69,7 +69,7 @@ pub struct RangeParams {
 
 impl RangeParams {
     /// The parameters of a config at an image `width`.
-    pub fn from_config(config: &hvs_shared::config::HvsConfig, width: usize) -> Self {
+    pub fn from_config(config: &hvs_runtime::config::HvsConfig, width: usize) -> Self {
         let f = &config.fusion;
         Self {
             window_count: f.windows as usize,
@@ -321,7 +321,7 @@ pub struct FusionPath {
     width: usize,
     height: usize,
     params: RangeParams,
-    detector: hvs_shared::config::EdgeDetector,
+    detector: hvs_runtime::config::EdgeDetector,
     low: u32,
     high: u32,
     source: RangeSource,
@@ -330,7 +330,7 @@ pub struct FusionPath {
 impl FusionPath {
     /// The path for `width x height` images of a config.
     pub fn new(
-        config: &hvs_shared::config::HvsConfig,
+        config: &hvs_runtime::config::HvsConfig,
         width: usize,
         height: usize,
         source: RangeSource,
@@ -364,11 +364,11 @@ impl FusionPath {
     ) -> ([RangeWindow; MAX_RANGE_WINDOWS], u32, u32) {
         let (w, h) = (self.width, self.height);
         match self.detector {
-            hvs_shared::config::EdgeDetector::Canny => {
+            hvs_runtime::config::EdgeDetector::Canny => {
                 self.canny
                     .detect(left, w, h, self.low, self.high, &mut self.edges);
             }
-            hvs_shared::config::EdgeDetector::Sobel => {
+            hvs_runtime::config::EdgeDetector::Sobel => {
                 sobel_edges(left, w, h, self.high, &mut self.edges);
             }
         }
@@ -452,10 +452,10 @@ mod tests {
         // f = 380 px, b = 0.1982 ft = 60.4 mm: distance_ft = 380 * 0.1982 / d.
         let reference = DepthModel {
             focal_px: 380.0,
-            baseline_m: 0.1982 * hvs_shared::config::M_PER_FT, // 60.41 mm
+            baseline_m: 0.1982 * hvs_runtime::config::M_PER_FT, // 60.41 mm
         };
         for d in [9.0, 25.5, 55.0] {
-            let ft = reference.range_m(d) / hvs_shared::config::M_PER_FT;
+            let ft = reference.range_m(d) / hvs_runtime::config::M_PER_FT;
             assert!((ft - 380.0 * 0.1982 / d).abs() < 1e-3, "d {d}: {ft} ft");
         }
     }

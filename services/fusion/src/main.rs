@@ -8,13 +8,13 @@ use std::collections::VecDeque;
 use std::process::ExitCode;
 
 use hvs_fusion::{FusionPath, merge_scans, merge_windows};
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::ipc::{ReceivedSample, TopicSubscriber};
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::ipc::{ReceivedSample, TopicSubscriber};
+use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     DisparityMap640x480, MAX_RANGE_WINDOWS, NO_HI_FRAME, ObstacleScan, RangeReport, RangeSource,
     RangeWindow, Sequenced, StereoFrame320x240, StereoFrame640x480,
 };
-use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 
 /// Frames kept waiting for their disparity map (the topic allows 5 borrowed samples).

@@ -15,9 +15,9 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use hvs_fusion::{DepthModel, FusionPath};
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::{HvsConfig, STAGE_NAMES};
-use hvs_shared::ipc::{
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::{HvsConfig, STAGE_NAMES};
+use hvs_runtime::ipc::{
     IpcNode, NodeOpenError, ReceiveError, ReceivedSample, TopicOpenError, TopicSubscriber,
 };
 use hvs_shared::messages::{

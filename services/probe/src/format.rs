@@ -43,13 +43,7 @@ fn span_ms(from_ns: u64, to_ns: u64) -> f64 {
 }
 
 fn source_label(code: u32) -> &'static str {
-    match FrameSource::from_code(code) {
-        Some(FrameSource::Simulator) => "sim",
-        Some(FrameSource::V4l2) => "v4l2",
-        Some(FrameSource::Files) => "files",
-        Some(FrameSource::Replay) => "replay",
-        None => "?",
-    }
+    FrameSource::from_code(code).map_or("?", FrameSource::label)
 }
 
 fn frame_text(h: &FrameHeader) -> String {
@@ -80,7 +74,7 @@ fn frame_json(h: &FrameHeader) -> Value {
 }
 
 fn algorithm_label(code: u32) -> &'static str {
-    StereoAlgorithm::from_code(code).map_or("?", StereoAlgorithm::name)
+    StereoAlgorithm::from_code(code).map_or("?", StereoAlgorithm::label)
 }
 
 fn disparity_text(h: &DisparityHeader) -> String {
@@ -146,11 +140,7 @@ describe_by_header! {
 }
 
 fn range_source_label(code: u32) -> &'static str {
-    match RangeSource::from_code(code) {
-        RangeSource::None => "-",
-        RangeSource::Lo => "lo",
-        RangeSource::Hi => "hi",
-    }
+    RangeSource::from_code(code).label()
 }
 
 fn used_windows(r: &RangeReport) -> &[RangeWindow] {
@@ -501,11 +491,7 @@ impl Describe for SupervisorStatus {
 }
 
 fn control_label(code: u32) -> &'static str {
-    match ControlCommand::from_code(code) {
-        Some(ControlCommand::Restart) => "restart",
-        Some(ControlCommand::Stop) => "stop",
-        None => "?",
-    }
+    ControlCommand::from_code(code).map_or("?", ControlCommand::label)
 }
 
 impl Describe for ControlRequest {

@@ -24,9 +24,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::error_chain;
-use hvs_shared::ipc::{ReceiveError, TopicSubscriber};
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::error_chain;
+use hvs_runtime::ipc::{ReceiveError, TopicSubscriber};
 use hvs_shared::messages::{FrameHeader, StereoFrame320x240, StereoFrame640x480, StereoPayload};
 use hvs_shared::topics::{Topic, TopicByPath};
 use serde_json::{Value, json};

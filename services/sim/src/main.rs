@@ -9,12 +9,12 @@
 use std::process::ExitCode;
 use std::time::Duration;
 
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::{run_dir, sim_pty_path};
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::{run_dir, sim_pty_path};
+use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     DisparityHeader, FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, SimTruth,
 };
-use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics;
 use hvs_sim::{GridMap, PscPty, SimClock, SimConfig, SimWorld, lock_psc};
 

@@ -48,7 +48,7 @@ impl Default for SimConfig {
 impl SimConfig {
     /// The simulator settings of an hvs config, rendering `width x height` images: camera
     /// focal length and baseline, webcam defects, PSC channels and seed.
-    pub fn from_hvs(config: &hvs_shared::config::HvsConfig, width: usize, height: usize) -> Self {
+    pub fn from_hvs(config: &hvs_runtime::config::HvsConfig, width: usize, height: usize) -> Self {
         let mut rig = StereoRig::new(width, height, config.camera.focal_px(width));
         rig.baseline_m = config.camera.baseline_m;
         rig.camera_forward_m = config.camera.forward_m;

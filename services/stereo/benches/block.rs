@@ -9,7 +9,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 use hvs_stereo::block::{BlockMatcher, BlockParams};
 use hvs_stereo::synthetic::{SyntheticPair, degrade, plane};

@@ -6,7 +6,7 @@
 //! default stereo config). Run with `cargo bench -p hvs-stereo --bench sgm`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 use hvs_stereo::sgm::{SgmMatcher, simd_available};
 use hvs_stereo::synthetic::{degrade, plane};

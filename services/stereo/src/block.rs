@@ -87,7 +87,7 @@
 //! keep a synthetic flat wall with noise of sigma 2 or 4 free of wrong matches (lower values
 //! let 2-3 % of it through) at the least cost in bad-2.
 
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 
 use crate::census::census;

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::DISPARITY_SCALE;
 use serde::Deserialize;
 

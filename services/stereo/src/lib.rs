@@ -23,7 +23,7 @@ pub mod rowalign;
 pub mod sgm;
 pub mod synthetic;
 
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 
 pub use block::BlockMatcher;

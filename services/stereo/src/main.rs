@@ -6,13 +6,13 @@
 
 use std::process::ExitCode;
 
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::StereoConfig;
-use hvs_shared::ipc::TopicSubscriber;
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::StereoConfig;
+use hvs_runtime::ipc::TopicSubscriber;
+use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     DisparityHeader, DisparityMap320x240, DisparityMap640x480, RowAlignState, StereoPayload,
 };
-use hvs_shared::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::topics::{self, Topic};
 use hvs_stereo::{ImageView, matcher_for};
 
@@ -92,7 +92,7 @@ impl RowReport {
             self.note_shift_dpx = Some(dpx);
             rt.set_note(format!(
                 "{} {}..{} rows {:+.1} px",
-                config.algorithm.name(),
+                config.algorithm.label(),
                 config.min_disp,
                 config.max_disp,
                 shift
@@ -140,14 +140,14 @@ where
     let mut maps = rt.node.publisher(maps_topic)?;
     rt.set_note(format!(
         "{} {}..{}",
-        config.algorithm.name(),
+        config.algorithm.label(),
         config.min_disp,
         config.max_disp
     ));
     tracing::info!(
         "{}: {} disparities {}..{} window {} on {}",
         rt.stage,
-        config.algorithm.name(),
+        config.algorithm.label(),
         config.min_disp,
         config.max_disp,
         config.window,

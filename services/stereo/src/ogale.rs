@@ -20,7 +20,7 @@
 //! test (`uniqueness_pct`), an optional subpixel fit, OpenVis3D's 3x3 median, the left-right
 //! check that marks occlusions, and the speckle filter.
 
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 
 use crate::equalize::equalize_right;

@@ -21,7 +21,7 @@
 //! The correction shifts the right image by the tracked offset (linear interpolation between
 //! two rows; nothing is done below [`APPLY_MIN_PX`]), so every matcher benefits.
 
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 
 use crate::{ImageView, MatchStats, StereoError, StereoMatcher};

@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::{V4l2Controls, V4l2PixelFormat};
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::{V4l2Controls, V4l2PixelFormat};
 use nix::errno::Errno;
 
 use super::controls::{ControlReport, apply_controls};

@@ -1,7 +1,7 @@
 //! Locking exposure, gain, white balance and the anti-flicker filter to the same values on
 //! both cameras (`[capture.v4l2.controls]`): automatic modes off, manual values set, read back.
 
-use hvs_shared::config::{PowerLine, V4l2Controls};
+use hvs_runtime::config::{PowerLine, V4l2Controls};
 use nix::errno::Errno;
 
 use super::device::V4l2Device;

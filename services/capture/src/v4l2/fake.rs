@@ -13,8 +13,8 @@ use std::os::fd::RawFd;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use hvs_shared::clock::monotonic_ns;
-use hvs_shared::config::V4l2PixelFormat;
+use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::V4l2PixelFormat;
 use nix::errno::Errno;
 
 use super::device::{

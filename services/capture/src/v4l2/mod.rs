@@ -16,7 +16,7 @@
 
 use std::path::PathBuf;
 
-use hvs_shared::config::V4l2PixelFormat;
+use hvs_runtime::config::V4l2PixelFormat;
 
 use crate::convert::ConvertError;
 use crate::pairing::PairError;

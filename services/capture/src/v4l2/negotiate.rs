@@ -12,7 +12,7 @@
 
 use std::fmt;
 
-use hvs_shared::config::V4l2PixelFormat;
+use hvs_runtime::config::V4l2PixelFormat;
 
 use super::device::{FrameRates, FrameSizes};
 use super::{CameraMode, fourcc_name, fourcc_of};

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use hvs_shared::config::{PowerLine, V4l2Controls, V4l2PixelFormat};
+use hvs_runtime::config::{PowerLine, V4l2Controls, V4l2PixelFormat};
 
 use super::controls::id;
 use super::fake::{FakeBus, FakeCamera, MINORU_BUS_BYTES_PER_S};

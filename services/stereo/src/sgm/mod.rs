@@ -58,7 +58,7 @@
 //! All buffers are reused across calls: after the first frame of a size, nothing is
 //! allocated.
 
-use hvs_shared::config::StereoConfig;
+use hvs_runtime::config::StereoConfig;
 use hvs_shared::messages::StereoAlgorithm;
 
 use crate::census::{census, census_with};

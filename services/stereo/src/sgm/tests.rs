@@ -3,7 +3,7 @@
 use super::*;
 use crate::synthetic::{SyntheticPair, degrade, flatten_region, plane, score};
 
-use hvs_shared::config::SgmConfig;
+use hvs_runtime::config::SgmConfig;
 
 fn config(min_disp: u32, max_disp: u32) -> StereoConfig {
     StereoConfig {
@@ -290,7 +290,7 @@ fn zero_penalties_give_plain_census_wta() {
         for paths in [4, 5, 8] {
             for simd in [false, true] {
                 let mut cfg = config(dmin, dmax);
-                cfg.sgm = hvs_shared::config::SgmConfig {
+                cfg.sgm = hvs_runtime::config::SgmConfig {
                     p1: 0,
                     p2: 0,
                     paths,
@@ -319,7 +319,7 @@ fn zero_penalties_give_plain_census_wta() {
 /// visible in the right image with a disparity inside the searched range 9..=55.
 fn accuracy(pair: &SyntheticPair, paths: u32, penalties: (u32, u32)) -> (f32, f32) {
     let mut cfg = config(9, 55);
-    cfg.sgm = hvs_shared::config::SgmConfig {
+    cfg.sgm = hvs_runtime::config::SgmConfig {
         p1: penalties.0,
         p2: penalties.1,
         paths,
@@ -732,7 +732,7 @@ fn bad_inputs_give_the_right_errors() {
     ));
     for (p1, p2, paths) in [(4, 32, 6), (4, 80, 5), (40, 32, 5)] {
         let mut c = config(0, 16);
-        c.sgm = hvs_shared::config::SgmConfig {
+        c.sgm = hvs_runtime::config::SgmConfig {
             p1,
             p2,
             paths,
@@ -987,7 +987,7 @@ fn tune_penalties() {
             let mut total = 0.0;
             for (scene, right) in scenes.iter().zip(&rights) {
                 let mut cfg = config(scene.min_disp, scene.max_disp);
-                cfg.sgm = hvs_shared::config::SgmConfig {
+                cfg.sgm = hvs_runtime::config::SgmConfig {
                     p1,
                     p2,
                     paths,

@@ -21,8 +21,8 @@ use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 use iceoryx2::sample_mut::SampleMut;
 
-use crate::messages::Sequenced;
-use crate::topics::Topic;
+use hvs_shared::messages::Sequenced;
+use hvs_shared::topics::Topic;
 
 /// The iceoryx2 service flavour used everywhere: inter-process, shared memory.
 pub type IpcService = ipc::Service;
@@ -644,8 +644,8 @@ impl<T: Debug + ZeroCopySend + Sequenced + 'static> TopicSubscriber<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::messages::{Decision, StereoFrame320x240};
-    use crate::topics::{DECISIONS, FRAMES_LO};
+    use hvs_shared::messages::{Decision, StereoFrame320x240};
+    use hvs_shared::topics::{DECISIONS, FRAMES_LO};
 
     fn unique_instance(tag: &str) -> String {
         format!("t{}-{tag}", std::process::id())

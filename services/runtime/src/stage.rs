@@ -4,7 +4,7 @@
 //! A stage's `main.rs` is then only its own wiring:
 //! ```ignore
 //! fn main() -> std::process::ExitCode {
-//!     hvs_shared::stage::run_stage("fusion", |rt| { /* open topics, loop */ Ok(()) })
+//!     hvs_runtime::stage::run_stage("fusion", |rt| { /* open topics, loop */ Ok(()) })
 //! }
 //! ```
 
@@ -22,9 +22,9 @@ use crate::config::{ConfigError, HvsConfig, validate_instance_name};
 use crate::ipc::{
     IpcNode, IpcService, NodeOpenError, PublishError, TopicOpenError, TopicPublisher,
 };
-use crate::messages::{NAME_LEN, NOTE_LEN, StageHealth, StageHeartbeat, encode_name};
 use crate::stats::{LatencySummary, LatencyWindow};
-use crate::topics;
+use hvs_shared::messages::{NAME_LEN, NOTE_LEN, StageHealth, StageHeartbeat, encode_name};
+use hvs_shared::topics;
 
 /// How often a stage beats. The supervisor's hang timeout is a multiple of this.
 pub const HEARTBEAT_PERIOD: Duration = Duration::from_millis(100);

@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::messages::StereoAlgorithm;
-use crate::topics::{self, Stage};
+use hvs_shared::messages::StereoAlgorithm;
+use hvs_shared::topics::{self, Stage};
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -47,16 +47,7 @@ pub enum ConfigError {
     },
 }
 
-/// The names of the stages the supervisor knows, in start order ([`Stage::ALL`]'s names).
-pub const STAGE_NAMES: [&str; 7] = {
-    let mut names = [""; 7];
-    let mut i = 0;
-    while i < 7 {
-        names[i] = Stage::ALL[i].name();
-        i += 1;
-    }
-    names
-};
+pub use hvs_shared::topics::STAGE_NAMES;
 
 /// The whole configuration.
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -1684,7 +1675,7 @@ mod tests {
     fn parse(text: &str) -> Result<HvsConfig, ConfigError> {
         // The sim's map from the repository, so that a file in a folder that does not exist
         // is still a whole, runnable config.
-        let map = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/maps/maze.txt");
+        let map = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/maps/maze.txt");
         let text = format!("{text}\n[sim]\nmap = \"{map}\"\n");
         HvsConfig::parse(&text, Path::new("/nonexistent/test.toml"))
     }
@@ -1782,7 +1773,7 @@ mod tests {
 
     #[test]
     fn minoru_example_config_is_valid() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/minoru.toml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/minoru.toml");
         let c = HvsConfig::load(&path).expect("config/minoru.toml must stay valid");
         assert_eq!(c.capture.source, CaptureSource::V4l2);
         assert!(!c.stage_enabled("sim"));
