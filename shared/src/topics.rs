@@ -109,13 +109,18 @@ impl<T> Topic<T> {
 
     /// Full iceoryx2 service name of this topic in `instance`.
     pub fn service_name(&self, instance: &str) -> String {
-        format!("{SERVICE_ROOT}/{instance}/{}", self.path)
+        service_name(instance, self.path)
     }
 
     /// Full service name of a per-stage topic (such as [`HEARTBEAT`]) for `stage`.
     pub fn stage_service_name(&self, instance: &str, stage: &str) -> String {
         format!("{SERVICE_ROOT}/{instance}/{}/{stage}", self.path)
     }
+}
+
+/// The full service name of the topic `path` (below `hvs/<instance>/`) of an instance.
+pub fn service_name(instance: &str, path: &str) -> String {
+    format!("{SERVICE_ROOT}/{instance}/{path}")
 }
 
 /// Raw camera pairs rendered by the simulator (the simulated Minoru).
@@ -231,11 +236,11 @@ impl core::fmt::Display for Stage {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StageInput {
     /// The reading stage.
-    pub stage: &'static str,
+    pub stage: Stage,
     /// The topic path it reads.
     pub topic: &'static str,
     /// The stage that publishes it.
-    pub publisher: &'static str,
+    pub publisher: Stage,
 }
 
 /// The inputs each stage cannot work without (the table above, read as a graph): the
@@ -246,34 +251,34 @@ pub struct StageInput {
 /// when they come, but drives without them.
 pub const STAGE_INPUTS: [StageInput; 6] = [
     StageInput {
-        stage: "capture",
+        stage: Stage::Capture,
         topic: SIM_CAMERA.path,
-        publisher: "sim",
+        publisher: Stage::Sim,
     },
     StageInput {
-        stage: "stereo-lo",
+        stage: Stage::StereoLo,
         topic: FRAMES_LO.path,
-        publisher: "capture",
+        publisher: Stage::Capture,
     },
     StageInput {
-        stage: "stereo-hi",
+        stage: Stage::StereoHi,
         topic: FRAMES_HI.path,
-        publisher: "capture",
+        publisher: Stage::Capture,
     },
     StageInput {
-        stage: "fusion",
+        stage: Stage::Fusion,
         topic: DISPARITY_LO.path,
-        publisher: "stereo-lo",
+        publisher: Stage::StereoLo,
     },
     StageInput {
-        stage: "decision",
+        stage: Stage::Decision,
         topic: RANGES.path,
-        publisher: "fusion",
+        publisher: Stage::Fusion,
     },
     StageInput {
-        stage: "actuator",
+        stage: Stage::Actuator,
         topic: DECISIONS.path,
-        publisher: "decision",
+        publisher: Stage::Decision,
     },
 ];
 

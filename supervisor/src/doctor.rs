@@ -327,7 +327,7 @@ fn camera_checks(c: &HvsConfig, opener: &dyn DeviceOpener) -> Vec<Check> {
 }
 
 fn serial_checks(c: &HvsConfig) -> Vec<Check> {
-    if !c.stage_enabled("actuator") {
+    if !c.stage_enabled(hvs_shared::topics::Stage::Actuator) {
         return vec![Check::ok("serial", "not used (the actuator stage is off)")];
     }
     let a = &c.actuator;

@@ -412,7 +412,7 @@ pub fn preflight(config: &HvsConfig) -> anyhow::Result<()> {
             Err(e) => return Err(config.invalid(section, e.to_string()).into()),
         }
     }
-    if config.stage_enabled("sim") {
+    if config.stage_enabled(hvs_shared::topics::Stage::Sim) {
         let map = config.resolve_path(&config.sim.map);
         hvs_sim::GridMap::load(&map)
             .with_context(|| format!("config file {}: `sim.map`", config.source_path.display()))?;

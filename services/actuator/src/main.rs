@@ -15,13 +15,13 @@ use hvs_runtime::config::sim_pty_path;
 use hvs_runtime::ipc::TopicPublisher;
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{ActuatorReport, MotionCommand, SendReason, StageHealth};
-use hvs_shared::topics;
+use hvs_shared::topics::{self, Stage};
 
 /// How often the actuator wakes to check the watchdog and the wire.
 const TICK: Duration = Duration::from_millis(5);
 
 fn main() -> ExitCode {
-    run_stage("actuator", run)
+    run_stage(Stage::Actuator, run)
 }
 
 /// The link with what the stage says about it.
@@ -131,8 +131,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         PathBuf::from(&cfg.device)
     };
     tracing::info!(
-        "{}: PSC on {} at {} baud, channels L{} R{}, watchdog {} ms",
-        rt.stage,
+        "PSC on {} at {} baud, channels L{} R{}, watchdog {} ms",
         device.display(),
         cfg.baud,
         cfg.left_channel,

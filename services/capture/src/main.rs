@@ -32,10 +32,10 @@ use hvs_shared::messages::{
     FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, LO_HEIGHT, LO_WIDTH, StageHealth,
     StereoFrame320x240, StereoFrame640x480,
 };
-use hvs_shared::topics;
+use hvs_shared::topics::{self, Stage};
 
 fn main() -> ExitCode {
-    run_stage("capture", |rt| match rt.config.capture.source {
+    run_stage(Stage::Capture, |rt| match rt.config.capture.source {
         CaptureSource::Sim => run_sim_source(rt),
         CaptureSource::V4l2 => run_v4l2_source(rt),
         CaptureSource::Files => run_files_source(rt),
@@ -48,7 +48,7 @@ fn run_sim_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     let mut hi = rt.node.publisher(&topics::FRAMES_HI)?;
     let mut lo = rt.node.publisher(&topics::FRAMES_LO)?;
     rt.set_note("source sim");
-    tracing::info!("{}: source sim ({})", rt.stage, camera.service());
+    tracing::info!("source sim ({})", camera.service());
 
     let waitset = rt.waitset()?;
     let camera_guard = waitset
@@ -152,8 +152,7 @@ impl PairPublisher {
             Some(rt.node.publisher(&topics::FRAMES_HI)?)
         } else {
             tracing::info!(
-                "{}: capture size {width}x{height}: only {} is published",
-                rt.stage,
+                "capture size {width}x{height}: only {} is published",
                 topics::FRAMES_LO.path
             );
             None
@@ -165,8 +164,7 @@ impl PairPublisher {
                 let calib = StereoCalibration::load(&path)?;
                 let rect = StereoRectifier::new(&calib, width, height)?;
                 tracing::info!(
-                    "{}: rectifying with {} ({})",
-                    rt.stage,
+                    "rectifying with {} ({})",
                     path.display(),
                     if calib.rectification.is_some() {
                         "R1/R2/P1/P2 from the file"
@@ -439,7 +437,7 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         let mut dropped_total = 0u64;
         loop {
             if rt.node.termination_requested() {
-                tracing::info!("{}: termination requested", rt.stage);
+                tracing::info!("termination requested");
                 return Ok(());
             }
             rt.beat_if_due();
@@ -474,7 +472,7 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                 Err(e) => rt.report_error("pair skipped", &e),
             }
         }
-        tracing::debug!("{}: {dropped_total} frames dropped unpaired", rt.stage);
+        tracing::debug!("{dropped_total} frames dropped unpaired");
         drop(cam);
         rt.set_health(StageHealth::Degraded);
         rt.set_note(format!("v4l2 {devices}: reconnecting"));
@@ -498,8 +496,7 @@ fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     let mut out = PairPublisher::open(rt, FrameSource::Files, size)?;
     let count = source.pairs().len();
     tracing::info!(
-        "{}: source files {} ({count} pairs, {}x{}, {}{})",
-        rt.stage,
+        "source files {} ({count} pairs, {}x{}, {}{})",
         folder.display(),
         c.width,
         c.height,
@@ -524,10 +521,7 @@ fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         }
         let Some(pair) = source.next_pair().cloned() else {
             finished = true;
-            tracing::info!(
-                "{}: played all {count} pairs; idle (capture.files.loop_playback = false)",
-                rt.stage
-            );
+            tracing::info!("played all {count} pairs; idle (capture.files.loop_playback = false)");
             rt.set_note(format!("files: all {count} pairs played"));
             return false;
         };
@@ -617,9 +611,8 @@ fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     let s = index.summary().clone();
     let lockstep = c.rate_hz <= 0.0;
     tracing::info!(
-        "{}: source replay {} (indexed in {:.1} s): {} frames in the file, playing {} \
+        "source replay {} (indexed in {:.1} s): {} frames in the file, playing {} \
          (320x240 {}, 640x480 {}) and {} actuator outputs; {}; {}",
-        rt.stage,
         file.display(),
         indexing.elapsed().as_secs_f64(),
         s.frames_in_file,
@@ -640,16 +633,14 @@ fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     );
     if let Some(cause) = &s.truncated {
         tracing::warn!(
-            "{}: {} breaks off ({cause}): playing the messages before the break",
-            rt.stage,
+            "{} breaks off ({cause}): playing the messages before the break",
             file.display()
         );
     }
     if s.hi_missing > 0 || s.lo_missing > 0 {
         tracing::warn!(
-            "{}: {} decided frames fused a 640x480 frame the file lacks and {} decided frames \
+            "{} decided frames fused a 640x480 frame the file lacks and {} decided frames \
              lack their 320x240 pair (lost while recording): those decisions cannot be repeated",
-            rt.stage,
             s.hi_missing,
             s.lo_missing
         );
@@ -738,9 +729,8 @@ fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         loop {
             let Some(event) = reader.next_event()? else {
                 tracing::info!(
-                    "{}: replay finished in {:.1} s: {} 320x240 and {} 640x480 pairs, {} \
+                    "replay finished in {:.1} s: {} 320x240 and {} 640x480 pairs, {} \
                      actuator outputs, {} lockstep timeouts",
-                    rt.stage,
                     started.elapsed().as_secs_f64(),
                     counts.lo,
                     counts.hi,

@@ -12,10 +12,10 @@ use hvs_decision::{Navigator, Policy};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{ActuatorReport, Decision};
-use hvs_shared::topics;
+use hvs_shared::topics::{self, Stage};
 
 fn main() -> ExitCode {
-    run_stage("decision", run)
+    run_stage(Stage::Decision, run)
 }
 
 /// Actuator outputs kept until a frame captured after them (15 a second: seconds of them).
@@ -31,8 +31,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         .with_camera_forward_m(rt.config.camera.forward_m);
     let policy = Policy::of(cfg.policy);
     tracing::info!(
-        "{}: {:?} policy, side wall < {:.3} m, front wall < {:.3} m (640x480: {:.3} / {:.3} m), visit memory {}",
-        rt.stage,
+        "{:?} policy, side wall < {:.3} m, front wall < {:.3} m (640x480: {:.3} / {:.3} m), visit memory {}",
         cfg.policy,
         cfg.lo.side_m,
         cfg.lo.front_m,

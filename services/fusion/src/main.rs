@@ -15,7 +15,7 @@ use hvs_shared::messages::{
     DisparityMap640x480, MAX_RANGE_WINDOWS, NO_HI_FRAME, ObstacleScan, RangeReport, RangeSource,
     RangeWindow, Sequenced, StereoFrame320x240, StereoFrame640x480,
 };
-use hvs_shared::topics;
+use hvs_shared::topics::{self, Stage};
 
 /// Frames kept waiting for their disparity map (the topic allows 5 borrowed samples).
 const HELD_FRAMES: usize = 3;
@@ -24,7 +24,7 @@ const HELD_FRAMES: usize = 3;
 const HI_RESULTS_KEPT: usize = 8;
 
 fn main() -> ExitCode {
-    run_stage("fusion", run)
+    run_stage(Stage::Fusion, run)
 }
 
 /// The latest long-range ranges.

@@ -24,11 +24,8 @@ use hvs_shared::messages::{
     Decision, DisparityHeader, DisparityMap320x240, DisparityMap640x480, RangeSource, Sequenced,
     StageHeartbeat, StereoFrame320x240, StereoFrame640x480, SupervisorStatus,
 };
-use hvs_shared::topics::{
-    self, SERVICE_ROOT, Topic, TopicByPath, known_topic_paths, topic_by_path,
-};
+use hvs_shared::topics::{self, Topic, TopicByPath, known_topic_paths, topic_by_path};
 use iceoryx2::prelude::*;
-use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
 
 use crate::format::Describe;
 use crate::rate::{RateEstimator, RateStats, rate_json, rate_line};
@@ -148,41 +145,18 @@ impl Probe {
         self.node.termination_requested()
     }
 
-    fn service_name(&self, path: &str) -> String {
-        format!("{SERVICE_ROOT}/{}/{path}", self.instance())
-    }
-
     /// Publisher count, subscriber count and subscriber limit of a topic; `None` when the
-    /// service does not exist. Opening a service port factory creates no port.
+    /// service does not exist.
     fn counts<T: Payload>(&self, path: &str) -> Result<Option<(usize, usize, usize)>, AttachError> {
-        let inspect = |detail: String| AttachError::Inspect {
-            instance: self.instance().to_string(),
-            topic: path.to_string(),
-            detail,
-        };
-        let service = self.service_name(path);
-        let name: ServiceName = service
-            .as_str()
-            .try_into()
-            .map_err(|e| inspect(format!("invalid service name {service:?}: {e:?}")))?;
-        match self
+        let ports = self
             .node
-            .node()
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .open()
-        {
-            Ok(factory) => {
-                let dynamic = factory.dynamic_config();
-                Ok(Some((
-                    dynamic.number_of_publishers(),
-                    dynamic.number_of_subscribers(),
-                    factory.static_config().max_subscribers(),
-                )))
-            }
-            Err(PublishSubscribeOpenError::DoesNotExist) => Ok(None),
-            Err(e) => Err(inspect(format!("{e:?}"))),
-        }
+            .topic_ports::<T>(path)
+            .map_err(|e| AttachError::Inspect {
+                instance: self.instance().to_string(),
+                topic: path.to_string(),
+                detail: hvs_runtime::error_chain(&e),
+            })?;
+        Ok(ports.map(|p| (p.publishers, p.subscribers, p.max_subscribers)))
     }
 
     /// True while the instance's supervisor runs (its status topic exists).

@@ -149,6 +149,17 @@ fn service_name(service: &str) -> Result<ServiceName, TopicOpenError> {
     })
 }
 
+/// The ports on a topic's service ([`IpcNode::topic_ports`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicPorts {
+    /// Publishers connected now.
+    pub publishers: usize,
+    /// Subscribers connected now.
+    pub subscribers: usize,
+    /// The most subscribers the service admits.
+    pub max_subscribers: usize,
+}
+
 /// An iceoryx2 node of one hvs process, bound to an instance.
 pub struct IpcNode {
     node: Node<IpcService>,
@@ -303,6 +314,37 @@ impl IpcNode {
             buffer,
             true,
         )
+    }
+
+    /// Who is on the topic `path` (below `hvs/<instance>/`, e.g. `heartbeat/fusion`), read
+    /// from the service's shared state; `None` when the service does not exist. Opening a
+    /// port factory creates no port, so this disturbs nobody.
+    pub fn topic_ports<T>(&self, path: &str) -> Result<Option<TopicPorts>, TopicOpenError>
+    where
+        T: Debug + ZeroCopySend + 'static,
+    {
+        let service = hvs_shared::topics::service_name(&self.instance, path);
+        let name = service_name(&service)?;
+        match self
+            .node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .open()
+        {
+            Ok(factory) => {
+                let dynamic = factory.dynamic_config();
+                Ok(Some(TopicPorts {
+                    publishers: dynamic.number_of_publishers(),
+                    subscribers: dynamic.number_of_subscribers(),
+                    max_subscribers: factory.static_config().max_subscribers(),
+                }))
+            }
+            Err(iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::DoesNotExist) => Ok(None),
+            Err(e) => Err(TopicOpenError::Service {
+                service,
+                source: e.into(),
+            }),
+        }
     }
 
     /// Subscribes to an existing topic without creating it: for clients such as `hvs status`

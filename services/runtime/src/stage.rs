@@ -4,9 +4,12 @@
 //! A stage's `main.rs` is then only its own wiring:
 //! ```ignore
 //! fn main() -> std::process::ExitCode {
-//!     hvs_runtime::stage::run_stage("fusion", |rt| { /* open topics, loop */ Ok(()) })
+//!     hvs_runtime::stage::run_stage(Stage::Fusion, |rt| { /* open topics, loop */ Ok(()) })
 //! }
 //! ```
+//!
+//! Everything a stage logs is inside one `tracing` span, `stage`, with the fields `name`,
+//! `instance` and `pid`: the messages themselves do not repeat the stage's name.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -24,7 +27,7 @@ use crate::ipc::{
 };
 use crate::stats::{LatencySummary, LatencyWindow};
 use hvs_shared::messages::{NAME_LEN, NOTE_LEN, StageHealth, StageHeartbeat, encode_name};
-use hvs_shared::topics;
+use hvs_shared::topics::{self, Stage};
 
 /// How often a stage beats. The supervisor's hang timeout is a multiple of this.
 pub const HEARTBEAT_PERIOD: Duration = Duration::from_millis(100);
@@ -46,11 +49,18 @@ pub struct StageArgs {
     #[arg(long, value_name = "NAME")]
     pub instance: Option<String>,
     /// Stage name (for example `stereo-lo`); defaults to the binary's role.
-    #[arg(long, value_name = "NAME")]
-    pub stage: Option<String>,
+    #[arg(long, value_name = "NAME", value_parser = parse_stage)]
+    pub stage: Option<Stage>,
     /// Replay this MCAP recording instead of the config's frame source (`hvs run --replay`).
     #[arg(long, value_name = "FILE")]
     pub replay: Option<PathBuf>,
+}
+
+fn parse_stage(name: &str) -> Result<Stage, String> {
+    Stage::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+        format!("unknown stage {name:?}; stages: {}", names.join(", "))
+    })
 }
 
 /// Why a stage could not start.
@@ -117,7 +127,7 @@ fn silence_stderr_if_orphaned() {
 
 /// Parses the stage command line, starts the runtime and runs `body`; maps the outcome to an
 /// exit code (0 clean stop, 1 runtime error, 2 bad configuration or arguments).
-pub fn run_stage<F>(role: &str, body: F) -> ExitCode
+pub fn run_stage<F>(role: Stage, body: F) -> ExitCode
 where
     F: FnOnce(&mut StageRuntime) -> Result<(), StageError>,
 {
@@ -127,26 +137,34 @@ where
         std::sync::atomic::Ordering::Relaxed,
     );
     let args = StageArgs::parse();
-    let mut runtime = match StageRuntime::start(&args, role) {
+    let stage = args.stage.unwrap_or(role);
+    let span = tracing::info_span!(
+        "stage",
+        name = stage.name(),
+        instance = tracing::field::Empty,
+        pid = std::process::id()
+    );
+    let _in_span = span.enter();
+    let mut runtime = match StageRuntime::start(&args, stage) {
         Ok(rt) => rt,
         Err(e) => {
-            tracing::error!("{role}: cannot start: {}", crate::error_chain(&e));
+            tracing::error!("cannot start: {}", crate::error_chain(&e));
             return match e {
                 StageStartError::Config(_) | StageStartError::Instance(_) => ExitCode::from(2),
                 _ => ExitCode::from(1),
             };
         }
     };
-    let stage = runtime.stage.clone();
+    span.record("instance", runtime.config.instance.as_str());
     match body(&mut runtime) {
         Ok(()) => {
             runtime.set_health(StageHealth::Stopping);
             runtime.beat();
-            tracing::info!("{stage}: stopped");
+            tracing::info!("stopped");
             ExitCode::SUCCESS
         }
         Err(e) => {
-            tracing::error!("{stage}: {}", crate::error_chain(e.as_ref()));
+            tracing::error!("{}", crate::error_chain(e.as_ref()));
             ExitCode::from(1)
         }
     }
@@ -163,8 +181,8 @@ pub enum LoopControl {
 
 /// The per-process state shared by every stage: config, node, heartbeat and counters.
 pub struct StageRuntime {
-    /// Stage name, e.g. `stereo-lo`.
-    pub stage: String,
+    /// The stage this process runs.
+    pub stage: Stage,
     /// The validated configuration.
     pub config: HvsConfig,
     /// The iceoryx2 node.
@@ -187,7 +205,7 @@ pub struct StageRuntime {
 impl StageRuntime {
     /// Loads the config, creates the node (cleaning up after crashed processes) and opens the
     /// heartbeat topic.
-    pub fn start(args: &StageArgs, role: &str) -> Result<Self, StageStartError> {
+    pub fn start(args: &StageArgs, stage: Stage) -> Result<Self, StageStartError> {
         let mut config = HvsConfig::load(&args.config)?;
         if let Some(instance) = &args.instance {
             validate_instance_name(instance).map_err(StageStartError::Instance)?;
@@ -196,14 +214,12 @@ impl StageRuntime {
         if let Some(file) = &args.replay {
             config.use_replay(file)?;
         }
-        let stage = args.stage.clone().unwrap_or_else(|| role.to_string());
-        let node = IpcNode::create(&config.instance, &stage)?;
-        let heartbeat = node.stage_publisher(&topics::HEARTBEAT, &stage)?;
+        let node = IpcNode::create(&config.instance, stage.name())?;
+        let heartbeat = node.stage_publisher(&topics::HEARTBEAT, stage.name())?;
         tracing::info!(
-            "{stage}: starting (instance {}, config {}, pid {})",
+            "starting (instance {}, config {})",
             config.instance,
-            args.config.display(),
-            std::process::id()
+            args.config.display()
         );
         let now = Instant::now();
         let mut rt = Self {
@@ -281,10 +297,10 @@ impl StageRuntime {
             stage: [0; NAME_LEN],
             note: [0; NOTE_LEN],
         };
-        hb.stage = encode_name(&self.stage);
+        hb.stage = encode_name(self.stage.name());
         hb.note = encode_name(&self.note);
         if let Err(e) = self.heartbeat.publish_copy(&hb) {
-            tracing::warn!("{}: heartbeat: {e}", self.stage);
+            tracing::warn!("heartbeat: {e}");
         }
     }
 
@@ -292,18 +308,18 @@ impl StageRuntime {
         let secs = self.last_status.elapsed().as_secs_f64().max(1e-3);
         self.last_latency = self.latency.take_summary();
         let (base_in, base_out, base_drops) = self.status_base;
+        let round2 = |x: f64| (x * 100.0).round() / 100.0;
         tracing::info!(
             target: STATUS_TARGET,
-            "{} {}: in {:.1}/s out {:.1}/s drops {} errors {} latency p50 {:.2} ms p99 {:.2} ms {}",
-            self.stage,
-            self.health.label(),
-            (self.frames_in - base_in) as f64 / secs,
-            (self.frames_out - base_out) as f64 / secs,
-            self.drops - base_drops,
-            self.errors,
-            self.last_latency.p50_ns as f64 / 1e6,
-            self.last_latency.p99_ns as f64 / 1e6,
-            self.note
+            health = self.health.label(),
+            in_hz = round2((self.frames_in - base_in) as f64 / secs),
+            out_hz = round2((self.frames_out - base_out) as f64 / secs),
+            drops = self.drops - base_drops,
+            errors = self.errors,
+            latency_p50_ms = round2(self.last_latency.p50_ns as f64 / 1e6),
+            latency_p99_ms = round2(self.last_latency.p99_ns as f64 / 1e6),
+            note = %self.note,
+            "status"
         );
         self.status_base = (self.frames_in, self.frames_out, self.drops);
         self.last_status = Instant::now();
@@ -365,7 +381,7 @@ impl StageRuntime {
             match result {
                 Ok(WaitSetRunResult::TerminationRequest) => {
                     silence_stderr_if_orphaned();
-                    tracing::info!("{}: termination requested", self.stage);
+                    tracing::info!("termination requested");
                     return Ok(());
                 }
                 Ok(_) => {}
@@ -377,7 +393,7 @@ impl StageRuntime {
     /// Logs and counts a non-fatal error.
     pub fn report_error(&mut self, context: &str, e: &dyn std::fmt::Display) {
         self.count_error();
-        tracing::warn!("{}: {context}: {e}", self.stage);
+        tracing::warn!("{context}: {e}");
     }
 
     /// Publishes `sample`, counting failures as errors rather than stopping the stage.

@@ -15,11 +15,11 @@ use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     DisparityHeader, FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, SimTruth,
 };
-use hvs_shared::topics;
+use hvs_shared::topics::{self, Stage};
 use hvs_sim::{GridMap, PscPty, SimClock, SimConfig, SimWorld, lock_psc};
 
 fn main() -> ExitCode {
-    run_stage("sim", run)
+    run_stage(Stage::Sim, run)
 }
 
 fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
@@ -34,8 +34,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         .map_err(|e| format!("cannot create run folder {}: {e}", run_folder.display()))?;
     let pty = PscPty::create(sim_pty_path(&cfg.instance), world.psc(), clock)?;
     tracing::info!(
-        "{}: map {} start ({:.2}, {:.2}) {:.0} deg; PSC on {} -> {}",
-        rt.stage,
+        "map {} start ({:.2}, {:.2}) {:.0} deg; PSC on {} -> {}",
         map_path.display(),
         start.x_m,
         start.y_m,

@@ -13,12 +13,12 @@ use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     DisparityHeader, DisparityMap320x240, DisparityMap640x480, RowAlignState, StereoPayload,
 };
-use hvs_shared::topics::{self, Topic};
+use hvs_shared::topics::{self, Stage, Topic};
 use hvs_stereo::{ImageView, matcher_for};
 
 fn main() -> ExitCode {
-    run_stage("stereo-lo", |rt| match rt.stage.as_str() {
-        "stereo-hi" => run_path(
+    run_stage(Stage::StereoLo, |rt| match rt.stage {
+        Stage::StereoHi => run_path(
             rt,
             &topics::FRAMES_HI,
             &topics::DISPARITY_HI,
@@ -131,8 +131,8 @@ where
 {
     let config = rt
         .config
-        .stereo_for(&rt.stage)
-        .ok_or_else(|| format!("stage {:?} is not stereo-lo or stereo-hi", rt.stage))?
+        .stereo_for(rt.stage)
+        .ok_or_else(|| format!("stage {} is not stereo-lo or stereo-hi", rt.stage))?
         .clone();
     let mut matcher = matcher_for(&config)?;
     // Buffer 1: a slow matcher always gets the newest pair; the skipped ones count as drops.
@@ -145,8 +145,7 @@ where
         config.max_disp
     ));
     tracing::info!(
-        "{}: {} disparities {}..{} window {} on {}",
-        rt.stage,
+        "{} disparities {}..{} window {} on {}",
         config.algorithm.label(),
         config.min_disp,
         config.max_disp,
