@@ -86,7 +86,7 @@ pub fn run(config_path: &std::path::Path, frames: usize) -> Result<()> {
         // The local map on: the decision's worst case.
         let mut decision_cfg = config.decision.clone();
         decision_cfg.local_map = true;
-        let mut nav = Navigator::new(&decision_cfg, &config.actuator.pulses);
+        let mut nav = Navigator::new(&decision_cfg, &config.robot, &config.actuator.pulses);
         let mut t_ns = 0u64;
         row(
             "decision (navigator+local map)",

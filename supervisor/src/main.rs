@@ -236,7 +236,7 @@ enum SimCommand {
         #[arg(long, default_value_t = 60.0)]
         duration: f64,
         /// Decisions per simulated second.
-        #[arg(long, default_value_t = 15.0)]
+        #[arg(long, default_value_t = hvs_drive::DEFAULT_RATE_HZ)]
         rate_hz: f64,
         /// Visit memory on or off (default: the config's decision.visit_memory).
         #[arg(long, value_parser = ["on", "off"])]
@@ -601,7 +601,7 @@ fn main() -> ExitCode {
                 .map(|p| p.parse::<hvs_sim::Pose>())
                 .transpose()
                 .map_err(|e| anyhow::anyhow!("--pose: {e}"))?;
-            let opts = drive::DriveOptions {
+            let opts = hvs_drive::DriveOptions {
                 map,
                 pose,
                 duration_s: duration,

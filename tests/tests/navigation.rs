@@ -1,38 +1,35 @@
 //! Closed-loop simulator tests: the robot's own algorithms (census SGM, Canny fusion, the
 //! fuzzy navigator, the actuator's commander and PSC bytes into the simulator's PSC emulator)
-//! driving in the intersection maps, through `hvs sim drive` (one process, faster than real
-//! time, deterministic).
+//! driving in the intersection maps, through the closed-loop simulator (`hvs_drive`: in this
+//! process, faster than real time, deterministic). The last test checks the CLI's errors.
 //!
 //! Each map starts the robot 1.93 m before the junction's near edge, facing it. A drive lasts
 //! 20 simulated seconds: long enough to reach the junction, decide and leave it by a branch,
 //! short enough not to reach the end of that branch (the branches end in walls, and what
 //! happens there is not what these tests are about).
 
-use hvs_tests::{hvs, hvs_ok, repo_root};
+use hvs_drive::{DriveOptions, drive as run_drive};
+use hvs_runtime::config::HvsConfig;
+use hvs_tests::{hvs, repo_root};
 use serde_json::Value;
 
 fn drive(map: &str, seconds: u32) -> Value {
-    drive_with(map, seconds, &[])
+    drive_with(map, seconds, None)
 }
 
-fn drive_with(map: &str, seconds: u32, extra: &[&str]) -> Value {
-    let map_path = repo_root().join("config/maps").join(map);
-    let config = repo_root().join("config/sim.toml");
-    let secs = seconds.to_string();
-    let mut args = vec![
-        "sim",
-        "drive",
-        "--config",
-        config.to_str().expect("utf-8 path"),
-        "--map",
-        map_path.to_str().expect("utf-8 path"),
-        "--duration",
-        &secs,
-        "--json",
-    ];
-    args.extend_from_slice(extra);
-    let out = hvs_ok(&args);
-    serde_json::from_slice(&out.stdout).expect("drive JSON")
+/// Drives `map` for `seconds` with the shipped config (the visit memory as configured, or
+/// as given), calling the closed-loop simulator directly; the report as JSON, the form
+/// `hvs sim drive --json` prints.
+fn drive_with(map: &str, seconds: u32, visit_memory: Option<bool>) -> Value {
+    let config = HvsConfig::load(&repo_root().join("config/sim.toml")).expect("config/sim.toml");
+    let opts = DriveOptions {
+        map: Some(repo_root().join("config/maps").join(map)),
+        duration_s: f64::from(seconds),
+        visit_memory,
+        ..DriveOptions::default()
+    };
+    let report = run_drive(&config, &opts).unwrap_or_else(|e| panic!("drive {map}: {e}"));
+    serde_json::to_value(report).expect("report as JSON")
 }
 
 /// Which branch the robot left by, from its final position in the start frame. The junction's
@@ -119,7 +116,7 @@ fn the_maze_is_driven_for_five_minutes_with_and_without_the_visit_memory() {
     let runs: Vec<(&str, Value)> = std::thread::scope(|s| {
         let handles: Vec<_> = ["on", "off"]
             .into_iter()
-            .map(|m| s.spawn(move || (m, drive_with("maze.txt", 300, &["--memory", m]))))
+            .map(|m| s.spawn(move || (m, drive_with("maze.txt", 300, Some(m == "on")))))
             .collect();
         handles
             .into_iter()

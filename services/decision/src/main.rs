@@ -1,25 +1,17 @@
-//! Decision stage process: one decision per range report, published for the actuator.
-//!
-//! The decision's clock is the frame's capture time, and the actuator output it dead-reckons
-//! from is what was on the wire by then (later outputs wait for a later frame): the pose then
-//! belongs to the view, and the same frames and outputs give the same decisions whatever the
-//! processing delays (a replay repeats the recorded decisions).
+//! Decision stage process: one decision per range report, published for the actuator. The
+//! order in which actuator outputs and frames are applied is `hvs_decision::ordering`.
 
-use std::collections::VecDeque;
 use std::process::ExitCode;
 
+use hvs_decision::ordering::{SentQueue, apply_sent, decision_message};
 use hvs_decision::{Navigator, Policy};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
-use hvs_shared::messages::{ActuatorReport, Decision};
 use hvs_shared::topics::{self, Stage};
 
 fn main() -> ExitCode {
     run_stage(Stage::Decision, run)
 }
-
-/// Actuator outputs kept until a frame captured after them (15 a second: seconds of them).
-const SENT_KEPT: usize = 64;
 
 fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let ranges = rt.node.subscriber(&topics::RANGES, 2)?;
@@ -27,7 +19,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let sent = rt.node.subscriber(&topics::ACTUATOR_SENT, 16)?;
     let mut decisions = rt.node.publisher(&topics::DECISIONS)?;
     let cfg = rt.config.decision.clone();
-    let mut nav = Navigator::new(&cfg, &rt.config.actuator.pulses)
+    let mut nav = Navigator::new(&cfg, &rt.config.robot, &rt.config.actuator.pulses)
         .with_camera_forward_m(rt.config.camera.forward_m);
     let policy = Policy::of(cfg.policy);
     tracing::info!(
@@ -46,19 +38,14 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let sent_guard = waitset
         .attach_notification(sent.listener())
         .map_err(|e| format!("cannot attach listener: {e:?}"))?;
-    let mut pending_sent: VecDeque<ActuatorReport> = VecDeque::new();
+    let mut pending_sent = SentQueue::new(SentQueue::DEFAULT_CAPACITY);
     rt.run_loop(&waitset, |rt, id| {
         if id.has_event_from(&sent_guard) || id.has_event_from(&guard) {
             sent.clear_events();
             while let Some(report) = sent.receive()? {
-                if pending_sent.len() == SENT_KEPT {
-                    // Only without frames for seconds: the oldest output is applied late
-                    // rather than lost.
-                    if let Some(a) = pending_sent.pop_front() {
-                        nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.ramp);
-                    }
+                if let Some(late) = pending_sent.push(*report.payload()) {
+                    apply_sent(&mut nav, &late);
                 }
-                pending_sent.push_back(*report.payload());
             }
         }
         if !id.has_event_from(&guard) {
@@ -70,26 +57,11 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             rt.count_in(1);
             rt.set_drops(ranges.dropped());
             let r = report.payload();
-            while let Some(a) = pending_sent.front().filter(|a| a.sent_ns <= r.capture_ns) {
-                // Byte 4 of a PSC position command is its ramp.
-                nav.on_sent(a.sent_ns, a.left_pw, a.right_pw, a.ramp);
-                pending_sent.pop_front();
+            for a in pending_sent.due(r.capture_ns) {
+                apply_sent(&mut nav, &a);
             }
             let d = nav.decide(&r.windows, r.window_count as usize, &r.scan, r.capture_ns);
-            let decision = Decision {
-                frame_id: r.frame_id,
-                capture_ns: r.capture_ns,
-                published_ns: monotonic_ns(),
-                command: d.command as u32,
-                intersection: d.intersection as u32,
-                wall_left: d.memberships.left as f32,
-                wall_front: d.memberships.front as f32,
-                wall_right: d.memberships.right as f32,
-                turn_angle_deg: d.turn_angle_deg as f32,
-                ramp: d.ramp,
-                policy: policy as u32,
-                reserved: [0; 2],
-            };
+            let decision = decision_message(r.frame_id, r.capture_ns, &d, policy, monotonic_ns());
             rt.set_note(format!(
                 "{} {} cells {}",
                 d.intersection.label(),

@@ -9,7 +9,7 @@
 //! `v = (vl + vr) / 2`, `w = (vr - vl) / track`. Without wheel encoders this is the best the
 //! robot knows about where it went; the visit memory and the turn execution use it.
 
-use hvs_runtime::config::{OdometryConfig, PulseTable};
+use hvs_runtime::config::{PulseTable, RobotConfig};
 
 /// PSC pulse range, 2 us units.
 const PW_SPAN: f64 = 1000.0;
@@ -89,7 +89,7 @@ impl Wheel {
 /// Dead reckoning state.
 #[derive(Debug, Clone)]
 pub struct Odometry {
-    config: OdometryConfig,
+    config: RobotConfig,
     left: Wheel,
     right: Wheel,
     pose: DeadReckonedPose,
@@ -99,7 +99,7 @@ pub struct Odometry {
 
 impl Odometry {
     /// Starts at the origin, stopped, with the robot's pulse table.
-    pub fn new(config: OdometryConfig, pulses: &PulseTable) -> Self {
+    pub fn new(config: RobotConfig, pulses: &PulseTable) -> Self {
         Self {
             config,
             left: Wheel::new(
@@ -177,7 +177,7 @@ mod tests {
     use super::*;
 
     fn odo() -> Odometry {
-        Odometry::new(OdometryConfig::default(), &PulseTable::default())
+        Odometry::new(RobotConfig::default(), &PulseTable::default())
     }
 
     #[test]

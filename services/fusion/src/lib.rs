@@ -2,6 +2,7 @@
 //! distances from disparities, and ranges over vertical windows, with no IPC.
 
 pub mod canny;
+pub mod pairing;
 
 use hvs_runtime::config::RangeStatistic;
 use hvs_shared::messages::{

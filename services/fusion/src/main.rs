@@ -4,16 +4,16 @@
 //! a fresh long-range result (in a replay: the long-range result the recorded run fused,
 //! named in the frame header, so the replay does not depend on timing).
 
-use std::collections::VecDeque;
 use std::process::ExitCode;
 
+use hvs_fusion::pairing::{HeldFrames, HiResults, HiWanted};
 use hvs_fusion::{FusionPath, merge_scans, merge_windows};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::ipc::{ReceivedSample, TopicSubscriber};
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
-    DisparityMap640x480, MAX_RANGE_WINDOWS, NO_HI_FRAME, ObstacleScan, RangeReport, RangeSource,
-    RangeWindow, Sequenced, StereoFrame320x240, StereoFrame640x480,
+    DisparityMap640x480, MAX_RANGE_WINDOWS, ObstacleScan, RangeReport, RangeSource, RangeWindow,
+    Sequenced, StereoFrame320x240, StereoFrame640x480,
 };
 use hvs_shared::topics::{self, Stage};
 
@@ -27,39 +27,41 @@ fn main() -> ExitCode {
     run_stage(Stage::Fusion, run)
 }
 
-/// The latest long-range ranges.
+/// What fusion keeps of a long-range result.
 struct HiRanges {
-    frame_id: u64,
-    capture_ns: u64,
     windows: [RangeWindow; MAX_RANGE_WINDOWS],
     scan: ObstacleScan,
 }
 
-/// Moves every queued frame into `held`, keeping the newest `HELD_FRAMES`.
+/// Moves every queued frame into `held` (the newest `HELD_FRAMES` stay).
 fn hold_frames<T>(
     sub: &TopicSubscriber<T>,
-    held: &mut VecDeque<ReceivedSample<T>>,
+    held: &mut HeldFrames<ReceivedSample<T>>,
 ) -> Result<(), StageError>
 where
     T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Sequenced + 'static,
 {
     sub.clear_events();
     while let Some(s) = sub.receive()? {
-        if held.len() == HELD_FRAMES {
-            held.pop_front();
-        }
-        held.push_back(s);
+        held.push(s);
     }
     Ok(())
+}
+
+fn hi_frame_id(s: &ReceivedSample<StereoFrame640x480>) -> u64 {
+    s.payload().header.frame_id
+}
+
+fn lo_frame_id(s: &ReceivedSample<StereoFrame320x240>) -> u64 {
+    s.payload().header.frame_id
 }
 
 /// The long-range side: pairs the newest 640x480 disparity map with its held frame.
 struct HiSide {
     frames: TopicSubscriber<StereoFrame640x480>,
-    held: VecDeque<ReceivedSample<StereoFrame640x480>>,
+    held: HeldFrames<ReceivedSample<StereoFrame640x480>>,
     path: FusionPath,
-    /// The newest results, oldest first.
-    results: VecDeque<HiRanges>,
+    results: HiResults<HiRanges>,
     unpaired: u64,
 }
 
@@ -72,31 +74,20 @@ impl HiSide {
             return Ok(());
         };
         let m = map.payload();
-        let Some(frame) = self
-            .held
-            .iter()
-            .find(|f| f.payload().header.frame_id == m.header.frame_id)
-        else {
+        let Some(frame) = self.held.find(m.header.frame_id) else {
             self.unpaired += 1;
             return Ok(());
         };
         let (windows, _, _) =
             self.path
                 .ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
-        if self.results.len() == HI_RESULTS_KEPT {
-            self.results.pop_front();
-        }
-        self.results.push_back(HiRanges {
-            frame_id: m.header.frame_id,
-            capture_ns: m.header.capture_ns,
-            windows,
-            scan: *self.path.scan(),
-        });
+        let scan = *self.path.scan();
+        self.results.push(
+            m.header.frame_id,
+            m.header.capture_ns,
+            HiRanges { windows, scan },
+        );
         Ok(())
-    }
-
-    fn find(&self, frame_id: u64) -> Option<&HiRanges> {
-        self.results.iter().rev().find(|h| h.frame_id == frame_id)
     }
 }
 
@@ -106,13 +97,13 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let disp_hi = rt.node.subscriber(&topics::DISPARITY_HI, 1)?;
     let mut hi = HiSide {
         frames: rt.node.subscriber(&topics::FRAMES_HI, 2)?,
-        held: VecDeque::new(),
+        held: HeldFrames::new(HELD_FRAMES, hi_frame_id),
         path: FusionPath::new(&rt.config, 640, 480, RangeSource::Hi),
-        results: VecDeque::new(),
+        results: HiResults::new(HI_RESULTS_KEPT),
         unpaired: 0,
     };
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
-    let mut held_lo: VecDeque<ReceivedSample<StereoFrame320x240>> = VecDeque::new();
+    let mut held_lo = HeldFrames::new(HELD_FRAMES, lo_frame_id);
     let mut lo_path = FusionPath::new(&rt.config, 320, 240, RangeSource::Lo);
     let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
     let min_valid_px = rt.config.fusion.min_valid_px;
@@ -140,40 +131,35 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 rt.count_in(1);
                 rt.set_drops(disp_lo.dropped() + unpaired + hi.unpaired);
                 let m = map.payload();
-                let Some(frame) = held_lo
-                    .iter()
-                    .find(|f| f.payload().header.frame_id == m.header.frame_id)
-                else {
+                let Some(frame) = held_lo.find(m.header.frame_id) else {
                     unpaired += 1;
                     continue;
                 };
                 let (lo_windows, edge_px, valid_edge_px) =
                     lo_path.ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
-                let hi_ranges = match frame.payload().header.replay_hi_frame_id {
-                    0 => hi.results.back().filter(|h| {
-                        m.header.capture_ns.saturating_sub(h.capture_ns) <= hi_max_age_ns
-                    }),
-                    NO_HI_FRAME => None,
-                    named => {
-                        if hi.find(named).is_none() {
-                            // Its map may be waiting behind this one.
-                            hi.take_maps(&disp_hi)?;
-                        }
-                        let found = hi.find(named);
-                        if found.is_none() {
-                            replay_missed += 1;
-                            rt.report_error(
-                                "replay",
-                                &format!(
-                                    "frame {}: the recorded 640x480 result of frame {named} \
-                                     is not here ({replay_missed} so far); fused without it",
-                                    m.header.frame_id
-                                ),
-                            );
-                        }
-                        found
-                    }
-                };
+                let wanted = HiWanted::from_header(frame.payload().header.replay_hi_frame_id);
+                if let HiWanted::Named(named) = wanted
+                    && hi.results.find(named).is_none()
+                {
+                    // Its map may be waiting behind this one.
+                    hi.take_maps(&disp_hi)?;
+                }
+                let hi_ranges = hi
+                    .results
+                    .choose(wanted, m.header.capture_ns, hi_max_age_ns);
+                if let HiWanted::Named(named) = wanted
+                    && hi_ranges.is_none()
+                {
+                    replay_missed += 1;
+                    rt.report_error(
+                        "replay",
+                        &format!(
+                            "frame {}: the recorded 640x480 result of frame {named} is not \
+                             here ({replay_missed} so far); fused without it",
+                            m.header.frame_id
+                        ),
+                    );
+                }
                 let mut sample = match ranges.loan() {
                     Ok(s) => s,
                     Err(e) => {
@@ -192,12 +178,12 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     edge_px,
                     windows: merge_windows(
                         &lo_windows,
-                        hi_ranges.map(|h| &h.windows),
+                        hi_ranges.map(|h| &h.result.windows),
                         min_valid_px,
                     ),
                     valid_edge_px,
                     reserved: 0,
-                    scan: merge_scans(lo_path.scan(), hi_ranges.map(|h| &h.scan)),
+                    scan: merge_scans(lo_path.scan(), hi_ranges.map(|h| &h.result.scan)),
                 };
                 rt.send_or_report(&mut ranges, sample, monotonic_ns() - received_ns);
             }

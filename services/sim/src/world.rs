@@ -47,7 +47,8 @@ impl Default for SimConfig {
 
 impl SimConfig {
     /// The simulator settings of an hvs config, rendering `width x height` images: camera
-    /// focal length and baseline, webcam defects, PSC channels and seed.
+    /// focal length, baseline and mount, webcam defects, the robot's body (`[robot]`, the
+    /// description the navigator also uses), PSC channels and seed.
     pub fn from_hvs(config: &hvs_runtime::config::HvsConfig, width: usize, height: usize) -> Self {
         let mut rig = StereoRig::new(width, height, config.camera.focal_px(width));
         rig.baseline_m = config.camera.baseline_m;
@@ -63,6 +64,11 @@ impl SimConfig {
                 right_delay_s: d.right_delay_ms / 1000.0,
             },
             robot: RobotParams {
+                width_m: config.robot.width_m,
+                length_m: config.robot.length_m,
+                track_eff_m: config.robot.track_m,
+                forward_speed_mps: config.robot.forward_speed_mps,
+                motor_tau_s: config.robot.motor_tau_s,
                 left_channel: config.actuator.left_channel,
                 right_channel: config.actuator.right_channel,
                 ..RobotParams::default()

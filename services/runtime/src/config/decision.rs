@@ -32,28 +32,6 @@ pub enum DecisionPolicy {
     ThresholdEstimation,
 }
 
-/// Odometry model of the robot (dead reckoning from the pulses actually sent).
-#[derive(Debug, Clone, Copy, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct OdometryConfig {
-    /// Wheel speed at the forward pulses, m/s (reference: 0.274).
-    pub forward_speed_mps: f64,
-    /// Effective skid-steer track width, metres.
-    pub track_m: f64,
-    /// Motor time constant, seconds.
-    pub motor_tau_s: f64,
-}
-
-impl Default for OdometryConfig {
-    fn default() -> Self {
-        Self {
-            forward_speed_mps: 0.274,
-            track_m: 0.55,
-            motor_tau_s: 0.1,
-        }
-    }
-}
-
 /// Walls, intersections and navigation.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -89,8 +67,6 @@ pub struct DecisionConfig {
     pub snap_turn_deg: f64,
     /// Threshold estimation: share of the middle window that must be near to block it, %.
     pub threshold_rate_pct: f64,
-    /// Odometry model for dead reckoning.
-    pub odometry: OdometryConfig,
     /// Build the local occupancy map from the obstacle scans and use it (heading fix from the
     /// walls, centring, side openings, lining up with a branch, clearance before turning).
     /// Off by default until it passes every junction test (docs/navigation.md).
@@ -129,7 +105,6 @@ impl Default for DecisionConfig {
             min_turn_deg: 30.0,
             snap_turn_deg: 90.0,
             threshold_rate_pct: 20.0,
-            odometry: OdometryConfig::default(),
             local_map: false,
             heading_fix_gain: 0.3,
             local_map_cell_m: 0.1,
@@ -160,14 +135,6 @@ impl DecisionConfig {
             ("min_turn_deg", self.min_turn_deg, 0.0, 90.0),
             ("snap_turn_deg", self.snap_turn_deg, 0.0, 90.0),
             ("threshold_rate_pct", self.threshold_rate_pct, 0.0, 100.0),
-            (
-                "odometry.forward_speed_mps",
-                self.odometry.forward_speed_mps,
-                0.001,
-                10.0,
-            ),
-            ("odometry.track_m", self.odometry.track_m, 0.01, 10.0),
-            ("odometry.motor_tau_s", self.odometry.motor_tau_s, 0.0, 10.0),
         ] {
             if !(lo..=hi).contains(&value) {
                 return Err(Invalid::new(

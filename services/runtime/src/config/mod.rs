@@ -15,6 +15,7 @@ mod camera;
 mod capture;
 mod decision;
 mod fusion;
+mod robot;
 mod sim;
 mod stages;
 mod stereo;
@@ -25,6 +26,7 @@ pub use camera::*;
 pub use capture::*;
 pub use decision::*;
 pub use fusion::*;
+pub use robot::*;
 pub use sim::*;
 pub use stages::*;
 pub use stereo::*;
@@ -119,6 +121,9 @@ pub struct HvsConfig {
     /// The simulated world.
     #[serde(default)]
     pub sim: SimConfig,
+    /// The robot's body (footprint, drive), shared by the simulator and the navigator.
+    #[serde(default)]
+    pub robot: RobotConfig,
     /// Per-stage process settings, keyed by stage name (see [`STAGE_NAMES`]).
     #[serde(default)]
     pub stages: BTreeMap<String, StageOverride>,
@@ -180,6 +185,7 @@ impl HvsConfig {
             ("decision", self.decision.validate()),
             ("actuator", self.actuator.validate()),
             ("sim", self.sim.validate()),
+            ("robot", self.robot.validate()),
         ];
         // The `[stereo.*]` sections are checked by the matchers' own rules
         // (`hvs_stereo::validate_section`, run by `hvs check`, `hvs run` and `hvs doctor`).
