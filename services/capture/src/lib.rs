@@ -8,7 +8,9 @@
 //! - [`v4l2`]: the Minoru's two UVC devices (hand-written V4L2 ioctls);
 //! - [`files`]: a folder of left/right PNG pairs;
 //! - [`calib`]: OpenCV stereo calibration files and the rectification remap;
-//! - [`replay`]: an MCAP recording of the pipeline, played back.
+//! - [`replay`]: an MCAP recording of the pipeline, played back;
+//! - [`writer`]: writing pairs into the published frames (headers, remap, downscale);
+//! - [`pacing`]: when the next pair goes out and when the cameras are tried again.
 //!
 //! The sources and their settings are described in `docs/capture.md`.
 
@@ -17,8 +19,10 @@
 pub mod calib;
 pub mod convert;
 pub mod files;
+pub mod pacing;
 pub mod pairing;
 pub mod replay;
 pub mod v4l2;
+pub mod writer;
 
 pub use convert::{ConvertError, downscale_2x};

@@ -20,17 +20,19 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use hvs_capture::calib::{StereoCalibration, StereoRectifier};
-use hvs_capture::downscale_2x;
 use hvs_capture::files::FileSource;
+use hvs_capture::pacing::{Backoff, Lockstep, ReplayWait, WaitState};
 use hvs_capture::replay::{ReplayEvent, ReplayFrame, ReplayIndex, ReplayPair};
 use hvs_capture::v4l2::{CameraMode, StereoCamera, StereoSpec};
+use hvs_capture::writer::{
+    PairTimes, PairWriter, WriteFailure, rebase_to, write_replayed, write_sim_pair,
+};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::config::CaptureSource;
 use hvs_runtime::ipc::TopicPublisher;
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
-    FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, LO_HEIGHT, LO_WIDTH, StageHealth,
-    StereoFrame320x240, StereoFrame640x480,
+    FrameSource, HI_HEIGHT, HI_WIDTH, StageHealth, StereoFrame320x240, StereoFrame640x480,
 };
 use hvs_shared::topics::{self, Stage};
 
@@ -75,12 +77,6 @@ fn run_sim_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                 );
                 continue;
             }
-            let header = |width: usize, height: usize| FrameHeader {
-                width: width as u32,
-                height: height as u32,
-                published_ns: monotonic_ns(),
-                ..src.header
-            };
             let mut hi_sample = match hi.loan() {
                 Ok(s) => s,
                 Err(e) => {
@@ -95,18 +91,12 @@ fn run_sim_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                     continue;
                 }
             };
-            {
-                let out = hi_sample.payload_mut();
-                out.left.copy_from_slice(&src.left);
-                out.right.copy_from_slice(&src.right);
-                out.header = header(HI_WIDTH, HI_HEIGHT);
-            }
-            {
-                let out = lo_sample.payload_mut();
-                downscale_2x(&src.left, HI_WIDTH, HI_HEIGHT, &mut out.left)?;
-                downscale_2x(&src.right, HI_WIDTH, HI_HEIGHT, &mut out.right)?;
-                out.header = header(LO_WIDTH, LO_HEIGHT);
-            }
+            write_sim_pair(
+                src,
+                hi_sample.payload_mut(),
+                lo_sample.payload_mut(),
+                monotonic_ns(),
+            )?;
             // The fast path first: it is the one the decisions wait for.
             // One pair in, one pair out (published at both resolutions).
             rt.send_or_report(&mut lo, lo_sample, monotonic_ns() - received_ns);
@@ -118,27 +108,12 @@ fn run_sim_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     })
 }
 
-/// Capture times of one pair.
-#[derive(Debug, Clone, Copy)]
-struct PairTimes {
-    /// Left exposure, CLOCK_MONOTONIC ns.
-    left_ns: u64,
-    /// Right exposure, CLOCK_MONOTONIC ns.
-    right_ns: u64,
-    /// When the stage had the pair, CLOCK_MONOTONIC ns (start of its processing latency).
-    received_ns: u64,
-}
-
-/// Publishes pairs from a non-sim source: fills the capture-size images in place (through the
-/// rectification remap if configured), downscales the 320x240 pair from a 640x480 one.
+/// Publishes pairs from a non-sim source: loans the samples and lets the [`PairWriter`]
+/// fill them in place.
 struct PairPublisher {
     hi: Option<TopicPublisher<StereoFrame640x480>>,
     lo: TopicPublisher<StereoFrame320x240>,
-    rectifier: Option<StereoRectifier>,
-    raw_left: Vec<u8>,
-    raw_right: Vec<u8>,
-    source: FrameSource,
-    frame_id: u64,
+    writer: PairWriter,
 }
 
 impl PairPublisher {
@@ -176,59 +151,11 @@ impl PairPublisher {
             }
             None => None,
         };
-        // Unrectified images go straight into the loaned samples: no buffers then.
-        let raw_len = if rectifier.is_some() {
-            width as usize * height as usize
-        } else {
-            0
-        };
         Ok(Self {
             hi,
             lo,
-            raw_left: vec![0; raw_len],
-            raw_right: vec![0; raw_len],
-            rectifier,
-            source,
-            frame_id: 0,
+            writer: PairWriter::new(source, rectifier, (width, height)),
         })
-    }
-
-    fn header(&self, times: PairTimes, width: usize, height: usize) -> FrameHeader {
-        FrameHeader {
-            frame_id: self.frame_id,
-            capture_ns: times.left_ns,
-            left_capture_ns: times.left_ns,
-            right_capture_ns: times.right_ns,
-            skew_ns: times.right_ns as i64 - times.left_ns as i64,
-            published_ns: monotonic_ns(),
-            width: width as u32,
-            height: height as u32,
-            source: self.source as u32,
-            reserved: 0,
-            replay_hi_frame_id: 0,
-        }
-    }
-
-    /// Fills `left`/`right` (capture size) with `fill`, through the remap if configured.
-    fn fill_images<E>(
-        rectifier: &Option<StereoRectifier>,
-        raw: (&mut [u8], &mut [u8]),
-        left: &mut [u8],
-        right: &mut [u8],
-        fill: impl FnOnce(&mut [u8], &mut [u8]) -> Result<(), E>,
-    ) -> Result<(), PublishFailure<E>> {
-        match rectifier {
-            Some(rect) => {
-                fill(raw.0, raw.1).map_err(PublishFailure::Source)?;
-                rect.left
-                    .apply(raw.0, left)
-                    .map_err(PublishFailure::Convert)?;
-                rect.right
-                    .apply(raw.1, right)
-                    .map_err(PublishFailure::Convert)
-            }
-            None => fill(left, right).map_err(PublishFailure::Source),
-        }
     }
 
     /// Publishes one pair; `fill` writes the grey images. `Ok(false)`: no sample could be
@@ -238,7 +165,7 @@ impl PairPublisher {
         rt: &mut StageRuntime,
         times: PairTimes,
         fill: impl FnOnce(&mut [u8], &mut [u8]) -> Result<(), E>,
-    ) -> Result<bool, PublishFailure<E>> {
+    ) -> Result<bool, WriteFailure<E>> {
         let mut lo_sample = match self.lo.loan() {
             Ok(s) => s,
             Err(e) => {
@@ -246,9 +173,7 @@ impl PairPublisher {
                 return Ok(false);
             }
         };
-        let raw = (self.raw_left.as_mut_slice(), self.raw_right.as_mut_slice());
-        self.frame_id += 1;
-        match &self.hi {
+        match &mut self.hi {
             Some(hi) => {
                 let mut hi_sample = match hi.loan() {
                     Ok(s) => s,
@@ -257,53 +182,26 @@ impl PairPublisher {
                         return Ok(false);
                     }
                 };
-                {
-                    let out = hi_sample.payload_mut();
-                    Self::fill_images(&self.rectifier, raw, &mut out.left, &mut out.right, fill)?;
-                    let lo_out = lo_sample.payload_mut();
-                    downscale_2x(&out.left, HI_WIDTH, HI_HEIGHT, &mut lo_out.left)
-                        .map_err(PublishFailure::Convert)?;
-                    downscale_2x(&out.right, HI_WIDTH, HI_HEIGHT, &mut lo_out.right)
-                        .map_err(PublishFailure::Convert)?;
-                    out.header = self.header(times, HI_WIDTH, HI_HEIGHT);
-                }
-                lo_sample.payload_mut().header = self.header(times, LO_WIDTH, LO_HEIGHT);
+                self.writer.write_hi(
+                    times,
+                    hi_sample.payload_mut(),
+                    lo_sample.payload_mut(),
+                    monotonic_ns(),
+                    fill,
+                )?;
                 // The fast path first: it is the one the decisions wait for.
                 rt.send_or_report(&mut self.lo, lo_sample, monotonic_ns() - times.received_ns);
-                if let Some(hi) = &mut self.hi
-                    && let Err(e) = hi.send(hi_sample)
-                {
+                if let Err(e) = hi.send(hi_sample) {
                     rt.report_publish_error(&e);
                 }
             }
             None => {
-                {
-                    let out = lo_sample.payload_mut();
-                    Self::fill_images(&self.rectifier, raw, &mut out.left, &mut out.right, fill)?;
-                }
-                lo_sample.payload_mut().header = self.header(times, LO_WIDTH, LO_HEIGHT);
+                self.writer
+                    .write_lo(times, lo_sample.payload_mut(), monotonic_ns(), fill)?;
                 rt.send_or_report(&mut self.lo, lo_sample, monotonic_ns() - times.received_ns);
             }
         }
         Ok(true)
-    }
-}
-
-/// Why a pair was not published.
-#[derive(Debug)]
-enum PublishFailure<E> {
-    /// The source could not deliver the images.
-    Source(E),
-    /// Remap or downscale failed (sizes; a bug).
-    Convert(hvs_capture::ConvertError),
-}
-
-impl<E: std::fmt::Display> std::fmt::Display for PublishFailure<E> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Source(e) => e.fmt(f),
-            Self::Convert(e) => e.fmt(f),
-        }
     }
 }
 
@@ -341,10 +239,10 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     };
     // Opened for the negotiated size (re-opened if a reconnect negotiates another).
     let mut out: Option<((u32, u32), PairPublisher)> = None;
-    let first_backoff = Duration::from_millis(v.reconnect_backoff_ms);
-    let max_backoff = Duration::from_millis(v.reconnect_max_backoff_ms);
-    let mut backoff = first_backoff;
-    let mut attempt = 0u32;
+    let mut backoff = Backoff::new(
+        Duration::from_millis(v.reconnect_backoff_ms),
+        Duration::from_millis(v.reconnect_max_backoff_ms),
+    );
     let devices = format!(
         "{} + {}",
         spec.left_device.display(),
@@ -355,18 +253,18 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
             Ok(cam) => cam,
             Err(e) if e.is_permanent() => return Err(e.into()),
             Err(e) => {
-                attempt += 1;
+                let delay = backoff.failed();
                 rt.count_error();
                 rt.set_health(StageHealth::Degraded);
                 rt.set_note(format!("v4l2 {devices}: reconnecting"));
                 tracing::warn!(
-                    "{e}; retrying in {:.1} s (attempt {attempt})",
-                    backoff.as_secs_f64()
+                    "{e}; retrying in {:.1} s (attempt {})",
+                    delay.as_secs_f64(),
+                    backoff.attempts()
                 );
-                if !wait_beating(rt, backoff) {
+                if !wait_beating(rt, delay) {
                     return Ok(());
                 }
-                backoff = (backoff * 2).min(max_backoff);
                 continue;
             }
         };
@@ -377,8 +275,8 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
             "source v4l2 {devices}: {}; pairs within {} ms{}",
             negotiated.summary(),
             v.max_skew_ms,
-            if attempt > 0 {
-                format!(" (reconnected after {attempt} attempts)")
+            if backoff.attempts() > 0 {
+                format!(" (reconnected after {} attempts)", backoff.attempts())
             } else {
                 String::new()
             }
@@ -425,8 +323,7 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         let Some((_, out)) = out.as_mut() else {
             return Err("capture: no publisher for the negotiated size".into());
         };
-        backoff = first_backoff;
-        attempt = 0;
+        backoff.succeeded();
         rt.set_health(StageHealth::Running);
         rt.set_note(format!(
             "v4l2 {devices} {}x{}@{}",
@@ -465,7 +362,7 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                         break;
                     }
                 }
-                Err(PublishFailure::Source(e)) if e.needs_reconnect() => {
+                Err(WriteFailure::Source(e)) if e.needs_reconnect() => {
                     rt.report_error("capture failed, reopening the cameras", &e);
                     break;
                 }
@@ -476,7 +373,7 @@ fn run_v4l2_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         drop(cam);
         rt.set_health(StageHealth::Degraded);
         rt.set_note(format!("v4l2 {devices}: reconnecting"));
-        if !wait_beating(rt, backoff) {
+        if !wait_beating(rt, backoff.current()) {
             return Ok(());
         }
     }
@@ -557,39 +454,26 @@ fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
         .attach_notification(ranges.listener())
         .map_err(|e| format!("cannot attach listener: {e:?}"))?;
     let timeout = Duration::from_millis(c.files.lockstep_timeout_ms);
-    let tick = waitset
+    // Wakes the loop to check the timeout (the guard must live as long as the loop).
+    let _tick = waitset
         .attach_interval((timeout / 4).max(Duration::from_millis(5)))
         .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+    let mut lockstep = Lockstep::new(timeout);
     send_next(rt, &mut out);
-    let mut last_sent = Instant::now();
+    lockstep.sent(out.writer.frame_id(), monotonic_ns());
     rt.run_loop(&waitset, |rt, id| {
-        let mut due = false;
         if id.has_event_from(&ranges_guard) {
             ranges.clear_events();
             while let Some(report) = ranges.receive()? {
-                if report.payload().frame_id >= out.frame_id {
-                    due = true;
-                }
+                lockstep.answered_by(report.payload().frame_id);
             }
         }
-        if id.has_event_from(&tick) && last_sent.elapsed() >= timeout {
-            due = true;
-        }
-        if due {
+        if lockstep.due(monotonic_ns()) {
             send_next(rt, &mut out);
-            last_sent = Instant::now();
+            lockstep.sent(out.writer.frame_id(), monotonic_ns());
         }
         Ok(LoopControl::Continue)
     })
-}
-
-/// What a lockstep replay waits for before the next frame.
-#[derive(Debug, Clone, Copy)]
-struct ReplayWait {
-    frame_id: u64,
-    decision: bool,
-    hi_disparity: bool,
-    since: Instant,
 }
 
 /// Replay counters for the closing line.
@@ -651,14 +535,7 @@ fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     let decisions = rt.node.subscriber(&topics::DECISIONS, 4)?;
     let disparity_hi = rt.node.subscriber(&topics::DISPARITY_HI, 1)?;
     // Recorded times move to now (one offset: every interval stays as recorded).
-    let offset_ns = monotonic_ns() as i128 - index.start_ns() as i128;
-    let rebase = move |t: u64| {
-        if t == 0 {
-            0
-        } else {
-            (t as i128 + offset_ns).max(0) as u64
-        }
-    };
+    let rebase = rebase_to(index.start_ns(), monotonic_ns());
     let mut reader = index.reader()?;
 
     let waitset = rt.waitset()?;
@@ -697,29 +574,27 @@ fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
             }
         }
         if let Some(w) = wait {
-            let done = (!w.decision || last_decision >= w.frame_id)
-                && (!w.hi_disparity || last_hi >= w.frame_id);
-            if done {
-                wait = None;
-            } else if w.since.elapsed() >= timeout {
-                counts.timeouts += 1;
-                rt.report_error(
-                    "replay",
-                    &format!(
-                        "no {} for frame {} within {} ms (capture.replay.lockstep_timeout_ms); \
-                         going on",
-                        if w.decision && last_decision < w.frame_id {
-                            "decision"
-                        } else {
-                            "640x480 disparity"
-                        },
-                        w.frame_id,
-                        timeout.as_millis()
-                    ),
-                );
-                wait = None;
-            } else {
-                return Ok(LoopControl::Continue);
+            match w.state(last_decision, last_hi, monotonic_ns(), timeout) {
+                WaitState::Done => wait = None,
+                WaitState::Waiting => return Ok(LoopControl::Continue),
+                WaitState::TimedOut { missing_decision } => {
+                    counts.timeouts += 1;
+                    rt.report_error(
+                        "replay",
+                        &format!(
+                            "no {} for frame {} within {} ms \
+                             (capture.replay.lockstep_timeout_ms); going on",
+                            if missing_decision {
+                                "decision"
+                            } else {
+                                "640x480 disparity"
+                            },
+                            w.frame_id,
+                            timeout.as_millis()
+                        ),
+                    );
+                    wait = None;
+                }
             }
         }
         // Lockstep: go on whenever nothing is awaited; at a rate: one frame per tick.
@@ -772,7 +647,7 @@ fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                             frame_id: step.frame_id,
                             decision: step.lo,
                             hi_disparity: step.wait_for_hi,
-                            since: Instant::now(),
+                            since_ns: monotonic_ns(),
                         });
                     }
                     return Ok(LoopControl::Continue);
@@ -804,24 +679,10 @@ fn publish_replayed<T>(
             return;
         }
     };
-    let out = sample.payload_mut();
-    let (header, left, right) = out.parts_mut();
-    if left.len() != pair.left.len() || right.len() != pair.right.len() {
-        rt.report_error(
-            "replay",
-            &format!("frame {}: image size mismatch", pair.header.frame_id),
-        );
+    if let Err(e) = write_replayed(pair, sample.payload_mut(), rebase, monotonic_ns()) {
+        rt.report_error("replay", &e);
         return;
     }
-    left.copy_from_slice(&pair.left);
-    right.copy_from_slice(&pair.right);
-    *header = FrameHeader {
-        capture_ns: rebase(pair.header.capture_ns),
-        left_capture_ns: rebase(pair.header.left_capture_ns),
-        right_capture_ns: rebase(pair.header.right_capture_ns),
-        published_ns: monotonic_ns(),
-        ..pair.header
-    };
     if counted {
         rt.send_or_report(publisher, sample, monotonic_ns() - received_ns);
     } else if let Err(e) = publisher.send(sample) {
