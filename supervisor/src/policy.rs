@@ -115,16 +115,24 @@ pub fn hang_limit(
 }
 
 /// Whether a stage in `state`, silent since `silent_since` (its last heartbeat, or its
-/// spawn), is hung at `now`.
+/// spawn), is hung at `now`. `starved` is how long of that silence its main thread was
+/// runnable but waiting for a CPU (other programs had the cores): that time does not count.
+/// A stuck loop or a blocked call waits for no CPU, so it is found after the limit as
+/// before; a stage that merely gets a small share of busy cores is not killed for it (its
+/// replacement would get no more). Silence past four times the limit counts whatever the
+/// reason, so a kernel that reports no waits cannot keep a stage alive forever.
 pub fn is_hung(
     state: StageState,
     spec: &StageSpec,
     startup_timeout: Duration,
     silent_since: Instant,
     now: Instant,
+    starved: Duration,
 ) -> bool {
-    hang_limit(state, spec, startup_timeout)
-        .is_some_and(|limit| now.saturating_duration_since(silent_since) > limit)
+    hang_limit(state, spec, startup_timeout).is_some_and(|limit| {
+        let silent = now.saturating_duration_since(silent_since);
+        silent > limit && (silent.saturating_sub(starved) > limit || silent > 4 * limit)
+    })
 }
 
 #[cfg(test)]
@@ -237,13 +245,21 @@ mod tests {
         let startup = Duration::from_secs(10);
         let t0 = Instant::now();
         // Running: the stage's heartbeat bound.
-        assert!(!is_hung(StageState::Running, &spec, startup, t0, t0 + S));
+        assert!(!is_hung(
+            StageState::Running,
+            &spec,
+            startup,
+            t0,
+            t0 + S,
+            Duration::ZERO
+        ));
         assert!(is_hung(
             StageState::Running,
             &spec,
             startup,
             t0,
-            t0 + S + S / 100
+            t0 + S + S / 100,
+            Duration::ZERO
         ));
         // Starting: the start-up bound (a stage that hangs before its first heartbeat).
         assert!(!is_hung(
@@ -251,14 +267,16 @@ mod tests {
             &spec,
             startup,
             t0,
-            t0 + 9 * S
+            t0 + 9 * S,
+            Duration::ZERO
         ));
         assert!(is_hung(
             StageState::Starting,
             &spec,
             startup,
             t0,
-            t0 + 11 * S
+            t0 + 11 * S,
+            Duration::ZERO
         ));
         // Stopping, backing off, failed: never "hung".
         for state in [
@@ -268,12 +286,60 @@ mod tests {
             StageState::Stopped,
         ] {
             assert!(
-                !is_hung(state, &spec, startup, t0, t0 + 3600 * S),
+                !is_hung(state, &spec, startup, t0, t0 + 3600 * S, Duration::ZERO),
                 "{state:?}"
             );
         }
         // A clock reading before the last heartbeat (a heartbeat stamped after `now` was
         // read) is not a hang.
-        assert!(!is_hung(StageState::Running, &spec, startup, t0 + S, t0));
+        assert!(!is_hung(
+            StageState::Running,
+            &spec,
+            startup,
+            t0 + S,
+            t0,
+            Duration::ZERO
+        ));
+    }
+
+    #[test]
+    fn time_spent_waiting_for_a_cpu_does_not_count_as_silence() {
+        let spec = spec(RestartPolicy::Always);
+        let startup = Duration::from_secs(10);
+        let t0 = Instant::now();
+        let running = |silent: Duration, starved: Duration| {
+            is_hung(
+                StageState::Running,
+                &spec,
+                startup,
+                t0,
+                t0 + silent,
+                starved,
+            )
+        };
+        // 1.5 s silent, 0.9 s of it waiting for a CPU: 0.6 s of its own, not hung.
+        assert!(!running(S * 3 / 2, S * 9 / 10));
+        // The same silence with little waiting: hung (a stuck loop or a blocked call).
+        assert!(running(S * 3 / 2, S / 10));
+        // Starved or not, four times the limit is a hang.
+        assert!(!running(S * 4, S * 4));
+        assert!(running(S * 4 + S / 10, S * 4));
+        // The start-up bound is treated alike.
+        assert!(!is_hung(
+            StageState::Starting,
+            &spec,
+            startup,
+            t0,
+            t0 + 12 * S,
+            5 * S
+        ));
+        assert!(is_hung(
+            StageState::Starting,
+            &spec,
+            startup,
+            t0,
+            t0 + 12 * S,
+            S
+        ));
     }
 }

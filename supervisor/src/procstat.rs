@@ -32,6 +32,18 @@ fn parse(stat: &str, statm: &str, ticks_per_s: f64, page_bytes: u64) -> Option<P
     })
 }
 
+/// Nanoseconds the process's main thread has spent runnable but waiting for a CPU
+/// (`/proc/<pid>/schedstat`, second field); `None` when the process is gone or the kernel
+/// keeps no such count. A stage's heartbeats come from its main thread.
+pub fn run_queue_wait_ns(pid: u32) -> Option<u64> {
+    let text = std::fs::read_to_string(format!("/proc/{pid}/schedstat")).ok()?;
+    parse_schedstat(&text)
+}
+
+fn parse_schedstat(text: &str) -> Option<u64> {
+    text.split_whitespace().nth(1)?.parse().ok()
+}
+
 /// Bytes as MiB.
 pub fn mib(bytes: u64) -> f64 {
     bytes as f64 / (1024.0 * 1024.0)
@@ -52,6 +64,19 @@ fn page_bytes() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_run_queue_wait_is_the_second_schedstat_field() {
+        assert_eq!(
+            parse_schedstat("166151231 19424771 368\n"),
+            Some(19_424_771)
+        );
+        assert_eq!(parse_schedstat("12"), None);
+        assert_eq!(parse_schedstat(""), None);
+        // This process exists and has a count (the kernel keeps it here).
+        assert!(run_queue_wait_ns(std::process::id()).is_some());
+        assert_eq!(run_queue_wait_ns(u32::MAX), None);
+    }
 
     #[test]
     fn fields_count_from_the_last_parenthesis() {

@@ -166,6 +166,8 @@ struct Slot {
     state: StageState,
     spawned_at: Instant,
     last_heartbeat: Option<Instant>,
+    /// The main thread's run-queue wait (ns) when the last heartbeat (or the spawn) was seen.
+    wait_at_heartbeat_ns: Option<u64>,
     health: Option<StageHealth>,
     /// The newest heartbeat's note.
     note: [u8; NOTE_LEN],
@@ -331,6 +333,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
             state,
             spawned_at: Instant::now(),
             last_heartbeat: None,
+            wait_at_heartbeat_ns: Some(0),
             health: None,
             note: [0; NOTE_LEN],
             hung: false,
@@ -522,6 +525,8 @@ impl Supervisor {
         };
         slot.spawned_at = Instant::now();
         slot.last_heartbeat = None;
+        // A new process has waited for no CPU yet.
+        slot.wait_at_heartbeat_ns = Some(0);
         slot.note = [0; NOTE_LEN];
         slot.health = None;
         slot.hung = false;
@@ -576,6 +581,12 @@ impl Supervisor {
                 // Heartbeats of an earlier incarnation (history, or in flight) are not ours.
                 if hb.pid != slot.pid || slot.pid == 0 {
                     continue;
+                }
+                if slot
+                    .last_heartbeat
+                    .is_none_or(|t| t.elapsed() >= Duration::from_millis(50))
+                {
+                    slot.wait_at_heartbeat_ns = procstat::run_queue_wait_ns(slot.pid);
                 }
                 slot.last_heartbeat = Some(Instant::now());
                 slot.health = StageHealth::from_code(hb.health);
@@ -639,15 +650,32 @@ impl Supervisor {
             let slot = &mut self.slots[i];
             let silent_since = slot.last_heartbeat.unwrap_or(slot.spawned_at);
             let now = Instant::now();
-            if !slot.hung
-                && policy::is_hung(slot.state, &slot.spec, startup_timeout, silent_since, now)
-            {
+            // Read only when the silence is past the limit already (one small file).
+            let starved = || {
+                let now_ns = procstat::run_queue_wait_ns(slot.pid)?;
+                Some(Duration::from_nanos(
+                    now_ns.saturating_sub(slot.wait_at_heartbeat_ns?),
+                ))
+            };
+            let hung = |starved| {
+                policy::is_hung(
+                    slot.state,
+                    &slot.spec,
+                    startup_timeout,
+                    silent_since,
+                    now,
+                    starved,
+                )
+            };
+            if !slot.hung && hung(Duration::ZERO) && hung(starved().unwrap_or_default()) {
                 let silent_for = now.saturating_duration_since(silent_since);
                 tracing::warn!(
-                    "hvs: {} (pid {}) sent no heartbeat for {} ms: killing it",
+                    "hvs: {} (pid {}) sent no heartbeat for {} ms ({} ms of it waiting for a \
+                     CPU): killing it",
                     slot.spec.name,
                     slot.pid,
-                    silent_for.as_millis()
+                    silent_for.as_millis(),
+                    starved().unwrap_or_default().as_millis()
                 );
                 slot.hung = true;
                 process::signal(slot.pid, Signal::SIGKILL);

@@ -114,26 +114,89 @@ fn a_replayed_recording_repeats_every_decision_for_the_same_frame() {
         original.len(),
         again.len()
     );
-    assert!(original.len() >= 200, "only {} decisions", original.len());
+    // 10 s at 15 Hz gives about 150 decisions; a machine whose cores are shared gives fewer
+    // (146 with both cores kept busy), so the bound is well below.
+    assert!(original.len() >= 60, "only {} decisions", original.len());
     assert!(turns > 0, "the robot never turned: the test proves less");
+    // A recorder that falls behind drops samples and says how many (slow readers never hold
+    // the pipeline up). From a complete recording every decision repeats exactly. A lossy one
+    // (a machine whose cores are shared) repeats exactly up to its first gap: after a lost
+    // sample the replay's navigator has seen less than the robot's had, and may differ.
+    let lost: Vec<(&str, u64)> = [
+        "decisions",
+        "frames/320x240",
+        "frames/640x480",
+        "ranges",
+        "actuator/sent",
+    ]
+    .into_iter()
+    .map(|topic| (topic, recorded_counts(&run.stdout, topic).1))
+    .filter(|(_, dropped)| *dropped > 0)
+    .collect();
+    let (_, dropped_by_replay) = recorded_counts(&replay.stdout, "decisions");
+    // The first frame id after which the recorded decisions are not contiguous (a frame the
+    // pipeline or the recorder lost): everything before it was recorded in full.
+    let first_gap = original
+        .keys()
+        .zip(original.keys().skip(1))
+        .find(|(a, b)| **b != **a + 1)
+        .map_or(u64::MAX, |(a, _)| *a + 1);
+    let compare_below = if lost.is_empty() { u64::MAX } else { first_gap };
     let mut differ = Vec::new();
-    for (id, d) in &original {
+    let mut compared = 0u64;
+    let mut not_replayed = 0u64;
+    for (id, d) in original.range(..compare_below) {
         match again.get(id) {
-            Some(r) if r == d => {}
+            Some(r) if r == d => compared += 1,
             Some(r) => differ.push(format!("frame {id}: recorded {d}, replayed {r}")),
-            None => differ.push(format!("frame {id}: recorded {d}, not replayed")),
+            None => not_replayed += 1,
         }
     }
     let extra: Vec<&u64> = again
-        .keys()
+        .range(..compare_below)
+        .map(|(id, _)| id)
         .filter(|id| !original.contains_key(id))
         .collect();
+    println!(
+        "{compared} decisions compared{}; {not_replayed} missing from the replay's recording \
+         ({dropped_by_replay} dropped by its recorder)",
+        if lost.is_empty() {
+            String::from(" (a complete recording: all of them)")
+        } else {
+            format!(" (a lossy recording, {lost:?} dropped: those before frame {first_gap})")
+        }
+    );
     assert!(
-        differ.is_empty() && extra.is_empty(),
-        "{} of {} decisions differ, {} extra: {:#?} {extra:?}",
+        not_replayed <= dropped_by_replay,
+        "{not_replayed} recorded decisions were not replayed, but the replay's recorder \
+         dropped only {dropped_by_replay}"
+    );
+    assert!(
+        extra.is_empty() || !lost.is_empty(),
+        "replayed decisions that a complete recording does not have: {extra:?}"
+    );
+    assert!(compared > 0, "no decision compared");
+    if lost.is_empty() {
+        assert!(compared >= 60, "only {compared} decisions compared");
+    }
+    assert!(
+        differ.is_empty(),
+        "{} of {} decisions differ: {:#?}",
         differ.len(),
-        original.len(),
-        extra.len(),
+        compared as usize + differ.len(),
         &differ[..differ.len().min(10)]
     );
+}
+
+/// The `written` and `dropped` counts `hvs run --record` prints for a topic
+/// (`record |   decisions   146 written   8 dropped`).
+fn recorded_counts(stdout: &[u8], topic: &str) -> (u64, u64) {
+    let text = String::from_utf8_lossy(stdout);
+    let line = text
+        .lines()
+        .find(|l| l.split_whitespace().nth(2) == Some(topic) && l.contains(" written "))
+        .unwrap_or_else(|| panic!("no record line for {topic} in:\n{text}"));
+    let f: Vec<&str> = line.split_whitespace().collect();
+    let number = |i: usize| -> u64 { f[i].parse().unwrap_or_else(|_| panic!("{line}")) };
+    (number(3), number(5))
 }
