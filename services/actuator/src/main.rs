@@ -12,7 +12,7 @@ use hvs_actuator::link::{LinkEvent, LinkSettings};
 use hvs_actuator::{Commander, DecisionInput, Outgoing, PscLink};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::config::sim_pty_path;
-use hvs_runtime::ipc::TopicPublisher;
+use hvs_runtime::ipc::{TopicPublisher, attach_interval};
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{ActuatorReport, MotionCommand, SendReason, StageHealth};
 use hvs_shared::topics::{self, Stage};
@@ -158,12 +158,8 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     conn.poll(rt, &mut commander);
 
     let waitset = rt.waitset()?;
-    let decisions_guard = waitset
-        .attach_notification(decisions.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
-    let _tick = waitset
-        .attach_interval(TICK)
-        .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+    let decisions_guard = decisions.attach_to(&waitset)?;
+    let _tick = attach_interval(&waitset, TICK)?;
 
     let result = rt.run_loop(&waitset, |rt, id| {
         if id.has_event_from(&decisions_guard) {

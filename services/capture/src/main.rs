@@ -29,7 +29,7 @@ use hvs_capture::writer::{
 };
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::config::CaptureSource;
-use hvs_runtime::ipc::TopicPublisher;
+use hvs_runtime::ipc::{TopicPublisher, attach_interval};
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     FrameSource, HI_HEIGHT, HI_WIDTH, StageHealth, StereoFrame320x240, StereoFrame640x480,
@@ -53,9 +53,7 @@ fn run_sim_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     tracing::info!("source sim ({})", camera.service());
 
     let waitset = rt.waitset()?;
-    let camera_guard = waitset
-        .attach_notification(camera.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let camera_guard = camera.attach_to(&waitset)?;
 
     rt.run_loop(&waitset, |rt, id| {
         if !id.has_event_from(&camera_guard) {
@@ -437,9 +435,7 @@ fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
 
     let waitset = rt.waitset()?;
     if c.files.rate_hz > 0.0 {
-        let tick = waitset
-            .attach_interval(Duration::from_secs_f64(1.0 / c.files.rate_hz))
-            .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+        let tick = attach_interval(&waitset, Duration::from_secs_f64(1.0 / c.files.rate_hz))?;
         return rt.run_loop(&waitset, |rt, id| {
             if id.has_event_from(&tick) {
                 send_next(rt, &mut out);
@@ -450,14 +446,10 @@ fn run_files_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     // Lockstep: the next pair goes out when the ranges of the last one arrive (the end of the
     // pipeline), or after lockstep_timeout_ms.
     let ranges = rt.node.subscriber(&topics::RANGES, 4)?;
-    let ranges_guard = waitset
-        .attach_notification(ranges.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let ranges_guard = ranges.attach_to(&waitset)?;
     let timeout = Duration::from_millis(c.files.lockstep_timeout_ms);
     // Wakes the loop to check the timeout (the guard must live as long as the loop).
-    let _tick = waitset
-        .attach_interval((timeout / 4).max(Duration::from_millis(5)))
-        .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+    let _tick = attach_interval(&waitset, (timeout / 4).max(Duration::from_millis(5)))?;
     let mut lockstep = Lockstep::new(timeout);
     send_next(rt, &mut out);
     lockstep.sent(out.writer.frame_id(), monotonic_ns());
@@ -539,20 +531,14 @@ fn run_replay_source(rt: &mut StageRuntime) -> Result<(), StageError> {
     let mut reader = index.reader()?;
 
     let waitset = rt.waitset()?;
-    let decisions_guard = waitset
-        .attach_notification(decisions.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
-    let hi_guard = waitset
-        .attach_notification(disparity_hi.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let decisions_guard = decisions.attach_to(&waitset)?;
+    let hi_guard = disparity_hi.attach_to(&waitset)?;
     let period = if lockstep {
         Duration::from_millis(10)
     } else {
         Duration::from_secs_f64(1.0 / c.rate_hz)
     };
-    let tick = waitset
-        .attach_interval(period)
-        .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+    let tick = attach_interval(&waitset, period)?;
     let timeout = Duration::from_millis(c.lockstep_timeout_ms);
     let (mut last_decision, mut last_hi) = (0u64, 0u64);
     let mut wait: Option<ReplayWait> = None;

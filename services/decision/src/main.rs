@@ -32,12 +32,8 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         if cfg.visit_memory { "on" } else { "off" }
     );
     let waitset = rt.waitset()?;
-    let guard = waitset
-        .attach_notification(ranges.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
-    let sent_guard = waitset
-        .attach_notification(sent.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let guard = ranges.attach_to(&waitset)?;
+    let sent_guard = sent.attach_to(&waitset)?;
     let mut pending_sent = SentQueue::new(SentQueue::DEFAULT_CAPACITY);
     rt.run_loop(&waitset, |rt, id| {
         if id.has_event_from(&sent_guard) || id.has_event_from(&guard) {

@@ -112,12 +112,8 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     rt.set_note(format!("{} windows", rt.config.fusion.windows));
 
     let waitset = rt.waitset()?;
-    let lo_guard = waitset
-        .attach_notification(disp_lo.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
-    let hi_guard = waitset
-        .attach_notification(disp_hi.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let lo_guard = disp_lo.attach_to(&waitset)?;
+    let hi_guard = disp_hi.attach_to(&waitset)?;
 
     rt.run_loop(&waitset, |rt, id| {
         if id.has_event_from(&hi_guard) {

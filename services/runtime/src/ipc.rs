@@ -149,6 +149,48 @@ fn service_name(service: &str) -> Result<ServiceName, TopicOpenError> {
     })
 }
 
+/// A WaitSet operation that failed (every stage waits on one).
+#[derive(Debug, thiserror::Error)]
+pub enum WaitSetError {
+    /// The WaitSet could not be created.
+    #[error("cannot create a WaitSet")]
+    Create(#[source] IoxError),
+    /// A topic's event listener could not be attached.
+    #[error("cannot wait on {service}")]
+    Attach {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
+    },
+    /// An interval could not be attached.
+    #[error("cannot attach a {period_ms} ms interval to the WaitSet")]
+    Interval {
+        /// The period.
+        period_ms: u128,
+        /// iceoryx2's error.
+        #[source]
+        source: IoxError,
+    },
+    /// Waiting failed.
+    #[error("the WaitSet failed")]
+    Wait(#[source] IoxError),
+}
+
+/// Wakes `waitset` every `period` (the guard must live as long as the wait).
+pub fn attach_interval(
+    waitset: &WaitSet<IpcService>,
+    period: Duration,
+) -> Result<iceoryx2::waitset::WaitSetGuard<'_, 'static, IpcService>, WaitSetError> {
+    waitset
+        .attach_interval(period)
+        .map_err(|e| WaitSetError::Interval {
+            period_ms: period.as_millis(),
+            source: e.into(),
+        })
+}
+
 /// The ports on a topic's service ([`IpcNode::topic_ports`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TopicPorts {
@@ -619,6 +661,20 @@ pub struct TopicSubscriber<T: Debug + ZeroCopySend + 'static> {
 }
 
 impl<T: Debug + ZeroCopySend + Sequenced + 'static> TopicSubscriber<T> {
+    /// Wakes `waitset` when this topic's publisher notifies (the guard must live as long as
+    /// the wait).
+    pub fn attach_to<'w, 'a>(
+        &'a self,
+        waitset: &'w WaitSet<IpcService>,
+    ) -> Result<iceoryx2::waitset::WaitSetGuard<'w, 'a, IpcService>, WaitSetError> {
+        waitset
+            .attach_notification(&self.listener)
+            .map_err(|e| WaitSetError::Attach {
+                service: self.service.clone(),
+                source: e.into(),
+            })
+    }
+
     /// The listener to attach to a WaitSet.
     pub fn listener(&self) -> &Listener<IpcService> {
         &self.listener

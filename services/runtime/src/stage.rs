@@ -23,7 +23,7 @@ use tracing_subscriber::EnvFilter;
 use crate::clock::monotonic_ns;
 use crate::config::{ConfigError, HvsConfig, validate_instance_name};
 use crate::ipc::{
-    IpcNode, IpcService, NodeOpenError, PublishError, TopicOpenError, TopicPublisher,
+    IpcNode, IpcService, NodeOpenError, PublishError, TopicOpenError, TopicPublisher, WaitSetError,
 };
 use crate::stats::{LatencySummary, LatencyWindow};
 use hvs_shared::messages::{NAME_LEN, NOTE_LEN, StageHealth, StageHeartbeat, encode_name};
@@ -333,11 +333,11 @@ impl StageRuntime {
     }
 
     /// A WaitSet that wakes on termination signals as well as on attached listeners.
-    pub fn waitset(&self) -> Result<WaitSet<IpcService>, StageError> {
-        Ok(WaitSetBuilder::new()
+    pub fn waitset(&self) -> Result<WaitSet<IpcService>, WaitSetError> {
+        WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<IpcService>()
-            .map_err(|e| format!("cannot create WaitSet: {e:?}"))?)
+            .map_err(|e| WaitSetError::Create(e.into()))
     }
 
     /// Runs the event loop: waits on `waitset` (whose listeners the caller attached), calls
@@ -385,7 +385,7 @@ impl StageRuntime {
                     return Ok(());
                 }
                 Ok(_) => {}
-                Err(e) => return Err(format!("WaitSet failed: {e:?}").into()),
+                Err(e) => return Err(WaitSetError::Wait(e.into()).into()),
             }
         }
     }

@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::config::{run_dir, sim_pty_path};
+use hvs_runtime::ipc::attach_interval;
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     DisparityHeader, FrameHeader, FrameSource, HI_HEIGHT, HI_WIDTH, SimTruth,
@@ -49,9 +50,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
 
     let waitset = rt.waitset()?;
     let frame_period = Duration::from_secs_f64(1.0 / cfg.camera.fps);
-    let tick = waitset
-        .attach_interval(frame_period)
-        .map_err(|e| format!("cannot attach interval: {e:?}"))?;
+    let tick = attach_interval(&waitset, frame_period)?;
     let right_delay_ns = (cfg.sim.defects.right_delay_ms * 1e6) as u64;
     let mut frame_id = 0u64;
 

@@ -155,9 +155,7 @@ where
 
     let mut row = RowReport::new(&config);
     let waitset = rt.waitset()?;
-    let frames_guard = waitset
-        .attach_notification(frames.listener())
-        .map_err(|e| format!("cannot attach listener: {e:?}"))?;
+    let frames_guard = frames.attach_to(&waitset)?;
 
     rt.run_loop(&waitset, |rt, id| {
         if !id.has_event_from(&frames_guard) {
