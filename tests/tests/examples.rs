@@ -39,19 +39,28 @@ fn python_with_iceoryx2() -> (String, std::path::PathBuf) {
             .is_ok_and(|o| o.status.success())
     };
     if !imports(&python) {
-        let out = Command::new(&python)
-            .args([
-                "-m",
-                "pip",
-                "install",
-                "--quiet",
-                "--disable-pip-version-check",
-            ])
-            .arg("--target")
-            .arg(&site)
-            .arg("iceoryx2==0.10.0")
-            .output()
-            .unwrap_or_else(|e| panic!("cannot run {python}: {e} (set HVS_PYTHON)"));
+        let pip = |extra: &[&str]| {
+            Command::new(&python)
+                .args([
+                    "-m",
+                    "pip",
+                    "install",
+                    "--quiet",
+                    "--disable-pip-version-check",
+                ])
+                .args(extra)
+                .arg("--target")
+                .arg(&site)
+                .arg("iceoryx2==0.10.0")
+                .output()
+                .unwrap_or_else(|e| panic!("cannot run {python}: {e} (set HVS_PYTHON)"))
+        };
+        let mut out = pip(&[]);
+        // Debian's python3 refuses installs it does not manage (PEP 668) even into a folder
+        // of our own; the folder is ours, so tell it so.
+        if String::from_utf8_lossy(&out.stderr).contains("externally-managed") {
+            out = pip(&["--break-system-packages"]);
+        }
         assert!(
             out.status.success(),
             "pip install iceoryx2==0.10.0 into {} failed: {}",

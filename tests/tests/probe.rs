@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use hvs_runtime::ipc::IpcNode;
 use hvs_shared::topics;
-use hvs_tests::{Pipeline, bin, hvs, hvs_ok, stages, unique_instance};
+use hvs_tests::{Pipeline, bin, hvs, hvs_ok, stage, stages, unique_instance};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use serde_json::Value;
@@ -299,7 +299,19 @@ fn probe_commands_show_a_running_pipeline() {
     );
     assert!(lines[2].contains("(total over"), "{text}");
 
-    // snapshot: PNGs of the expected sizes.
+    // snapshot: PNGs of the expected sizes. The 640x480 worker (niced) may take seconds a
+    // map when other programs keep the cores busy: the snapshot's wait is derived from its
+    // measured rate, not fixed.
+    let hi_out = |s: &Value| stage(s, "stereo-hi")["frames_out"].as_u64().unwrap_or(0);
+    let base = hi_out(&p.status().expect("status"));
+    let since = Instant::now();
+    p.wait_status("two more 640x480 maps", START, |s| hi_out(s) >= base + 2);
+    let hi_period = since.elapsed() / 2;
+    let timeout_s = format!(
+        "{:.1}",
+        (10 * hi_period).max(Duration::from_secs(5)).as_secs_f64()
+    );
+    println!("640x480 maps every {hi_period:?}: snapshots wait up to {timeout_s} s");
     let dir = tempfile::tempdir().expect("tempdir");
     for (topic, fused, size) in [
         ("frames/320x240", false, (640, 240)),
@@ -316,6 +328,8 @@ fn probe_commands_show_a_running_pipeline() {
             file_arg.as_str(),
             "--instance",
             instance,
+            "--timeout-s",
+            timeout_s.as_str(),
         ];
         if fused {
             args.push("--fused");

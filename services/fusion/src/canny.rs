@@ -729,48 +729,6 @@ mod tests {
         check_all_images(&mut Canny::new());
     }
 
-    /// Median time of `detect` over `runs` calls on a textured `w x h` image, in us.
-    fn median_detect_us(detect: Detect, w: usize, h: usize, runs: usize) -> f64 {
-        let mut rng = Rng(12345);
-        let img = textured_image(&mut rng, w, h);
-        let mut edges = vec![0u8; w * h];
-        let mut canny = Canny::new();
-        detect(&mut canny, &img, w, h, 40, 120, &mut edges);
-        let mut times: Vec<f64> = (0..runs)
-            .map(|_| {
-                let t = std::time::Instant::now();
-                let n = detect(
-                    &mut canny,
-                    std::hint::black_box(&img),
-                    w,
-                    h,
-                    40,
-                    120,
-                    &mut edges,
-                );
-                std::hint::black_box(n);
-                t.elapsed().as_secs_f64() * 1e6
-            })
-            .collect();
-        times.sort_by(f64::total_cmp);
-        times[runs / 2]
-    }
-
-    #[test]
-    #[ignore = "timing; run with --release --ignored --nocapture"]
-    fn canny_timing() {
-        let paths: [(&str, Detect); 2] = [
-            ("detect", Canny::detect),
-            ("detect_portable", Canny::detect_portable),
-        ];
-        for &(w, h) in &[(320, 240), (640, 480)] {
-            for (path, detect) in paths {
-                let us = median_detect_us(detect, w, h, 200);
-                println!("canny {w}x{h} {path}: median {us:.1} us over 200 runs");
-            }
-        }
-    }
-
     fn step_image(w: usize, h: usize, edge_x: usize) -> Vec<u8> {
         (0..w * h)
             .map(|i| if i % w < edge_x { 40 } else { 200 })

@@ -64,7 +64,7 @@
 //! # Settings
 //!
 //! Measured on Middlebury tsukuba, venus and motorcycle (bad-2 over the scored pixels, with
-//! and without webcam defects on the right image; the `tests::datasets` tests of this
+//! and without webcam defects on the right image; `examples/block_tables.rs`, run on demand, for this
 //! module), the config defaults (window 9, texture threshold 4, uniqueness 10 %) leave
 //! 40-50 % of the scored pixels of the clean scenes invalid; the texture threshold alone adds
 //! 23-32 points of bad-2 there. Recommended, per cost:

@@ -1,11 +1,9 @@
 //! Tests of the block matcher on synthetic pairs: every cost, the refinements, SIMD and
-//! threads, config handling and errors.
+//! threads, config handling and errors (the Middlebury tables and sweeps are the
+//! `block_tables` example).
 
 use super::*;
 use crate::synthetic::{SyntheticPair, degrade, flatten_region, plane};
-
-/// The Middlebury scoring tables and sweeps (`#[ignore]`d, run on demand).
-mod datasets;
 
 const COSTS: [BlockCost; 4] = [
     BlockCost::Sad,

@@ -284,7 +284,7 @@ pub(super) fn row_sums(raw: &[u8], geo: Geometry, block: usize, out: &mut [u8]) 
 /// Why the average: the census of a single pixel flips bits under webcam noise and a
 /// vertical misalignment; averaging over 5x5 (OpenCV's SGBM sums its pixel costs over
 /// `blockSize` windows for the same reason) lowered the mean bad-2 of the three Middlebury
-/// scenes with webcam defects from 23.6 to 12.1 % (all filters off, `tests::tune_penalties`),
+/// scenes with webcam defects from 23.6 to 12.1 % (all filters off, `examples/sgm_sweeps.rs tune-penalties`),
 /// and the clean one from 7.0 to 6.1 %.
 #[inline(always)]
 pub(super) fn block_costs(

@@ -11,13 +11,13 @@
 //!    makes the matcher hold up on raw webcam pairs: on Tsukuba, Venus and Motorcycle with
 //!    right-image defects (gain 0.8, +10, noise sigma 4, 1 px vertical shift) and all
 //!    filters off, mean bad-2 fell from 23.6 % (pixel census) to 12.1 % (5x5), and the clean
-//!    pairs went from 7.0 % to 6.1 % (`tests::tune_penalties`);
+//!    pairs went from 7.0 % to 6.1 % (`examples/sgm_sweeps.rs tune-penalties`);
 //!    then a texture mask: mean |L(x+1) - L(x-1)| of the (prefiltered) left image over a
 //!    square window below [`SgmParams::texture_threshold`] → invalid. SGM would otherwise
 //!    fill flat regions with disparities propagated from their borders. The default (0.25
 //!    grey levels per pixel over 11x11) clears flat areas with noise up to sigma 0.5; with
 //!    noise sigma 2 on the left image about 30 % of a flat block stays valid, two thirds of
-//!    it wrong, unless the threshold is raised to 1.0 (`tests::flat_block_sweep`), which costs
+//!    it wrong, unless the threshold is raised to 1.0 (`examples/sgm_sweeps.rs flat-block`), which costs
 //!    about 15 points of density on Middlebury;
 //! 5. path aggregation `L_r(p,d) = C(p,d) + min(L_r(p-r,d), L_r(p-r,d±1) + P1,
 //!    min_k L_r(p-r,k) + P2) - min_k L_r(p-r,k)`, summed over the paths into `S`:

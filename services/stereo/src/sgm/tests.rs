@@ -1,4 +1,5 @@
-//! Tests of the sgm matcher (the ignored ones are tuning sweeps and timing loops).
+//! Tests of the sgm matcher (the tuning sweeps and the timing loop are the `sgm_sweeps`
+//! example).
 
 use super::*;
 use crate::synthetic::{SyntheticPair, degrade, flatten_region, plane, score};
@@ -443,187 +444,6 @@ fn flat_block_between_two_planes_is_invalid() {
     }
 }
 
-/// Timing loop for profilers: `SGM_SIZE=640 SGM_ITERS=50 cargo test --release ...
-/// sgm::tests::timing_loop -- --ignored --nocapture`.
-#[test]
-#[ignore]
-fn timing_loop() {
-    let env = |k: &str, d: usize| {
-        std::env::var(k)
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(d)
-    };
-    // The benchmark's scene: a slanted plane, disparities 12..53 (320x240) or 40..106.
-    let (w, h, dmin, dmax, b, c) = if env("SGM_SIZE", 320) == 640 {
-        (640, 480, 18, 110, 50.0, 56.0)
-    } else {
-        (320, 240, 9, 55, 25.0, 28.0)
-    };
-    let pair = webcam(plane(w, h, -16.0 / w as f32, b / h as f32, c, 7), 8);
-    if let Ok(prefix) = std::env::var("SGM_DUMP") {
-        // Raw grey images, for timing other matchers on the same pair.
-        std::fs::write(format!("{prefix}_{w}x{h}_left.raw"), &pair.left).expect("dump");
-        std::fs::write(format!("{prefix}_{w}x{h}_right.raw"), &pair.right).expect("dump");
-    }
-    let mut cfg = config(dmin, dmax);
-    cfg.sgm.paths = env("SGM_PATHS", 5) as u32;
-    let mut m = SgmMatcher::from_config(&cfg)
-        .expect("cfg")
-        .with_simd(env("SGM_SIMD", 1) == 1);
-    // CPU time of this thread (utime + stime in clock ticks of 10 ms): a fair measure
-    // when other processes share the cores.
-    let cpu_ticks = || {
-        std::fs::read_to_string("/proc/thread-self/stat")
-            .ok()
-            .and_then(|t| {
-                // Fields after the name: state, ppid, ..., utime (11), stime (12).
-                let f: Vec<&str> = t.rsplit(')').next()?.split_whitespace().collect();
-                Some(f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?)
-            })
-            .unwrap_or(0)
-    };
-    let iters = env("SGM_ITERS", 30);
-    let mut out = vec![0u16; w * h];
-    let l = ImageView::new(&pair.left, w, h).expect("left");
-    let r = ImageView::new(&pair.right, w, h).expect("right");
-    m.compute(l, r, &mut out).expect("warm-up");
-    let mut times = Vec::new();
-    let c0 = cpu_ticks();
-    for _ in 0..iters {
-        let t = std::time::Instant::now();
-        m.compute(l, r, &mut out).expect("compute");
-        times.push(t.elapsed().as_secs_f64() * 1e3);
-        std::hint::black_box(&out);
-    }
-    let cpu_ms = (cpu_ticks() - c0) as f64 * 10.0 / iters as f64;
-    times.sort_by(f64::total_cmp);
-    let pct = |q: f64| times[((times.len() - 1) as f64 * q) as usize];
-    eprintln!(
-        "{w}x{h}: median {:.2} ms, min {:.2} ms (p10 {:.2}, p90 {:.2}), mean thread CPU time {:.2} ms",
-        pct(0.5),
-        times[0],
-        pct(0.1),
-        pct(0.9),
-        cpu_ms
-    );
-}
-
-#[test]
-#[ignore]
-fn subpixel_accuracy() {
-    let (w, h) = (320, 240);
-    let scenes = [
-        ("wall", plane(w, h, -0.1, 0.0, 40.0, 51)),
-        ("floor", plane(w, h, 0.0, 0.1, 12.0, 52)),
-        ("front", plane(w, h, 0.0, 0.0, 30.37, 53)),
-    ];
-    for (name, pair) in scenes {
-        for (label, p) in [("clean", pair.clone()), ("webcam", webcam(pair.clone(), 3))] {
-            let mut m = SgmMatcher::from_config(&config(9, 55)).expect("cfg");
-            let out = run(&mut m, &p);
-            let (mut n, mut sum, mut sq) = (0usize, 0f64, 0f64);
-            for (i, &q) in out.iter().enumerate() {
-                let t = p.disparity_px[i];
-                if q != 0 && (9.0..=55.0).contains(&t) {
-                    let e = (q as f64 / 256.0 - t as f64).abs();
-                    if e < 1.0 {
-                        n += 1;
-                        sum += e;
-                        sq += e * e;
-                    }
-                }
-            }
-            eprintln!(
-                "{name} {label}: mean |err| {:.3} px, rms {:.3} px over {n}",
-                sum / n as f64,
-                (sq / n as f64).sqrt()
-            );
-        }
-    }
-    if let Some(scene) = load_scene("venus") {
-        let mut cfg = config(scene.min_disp, scene.max_disp);
-        cfg.sgm.p1 = 16;
-        cfg.sgm.p2 = 48;
-        let out = run_scene(&scene, &scene.right, &cfg, None);
-        let (mut n, mut sum, mut bad05) = (0usize, 0f64, 0usize);
-        for ((&q, &gt), &scored) in out.iter().zip(&scene.gt).zip(&scene.mask) {
-            if scored && gt > 0.0 && q != 0 {
-                let e = (q as f64 / 256.0 - gt as f64).abs();
-                if e < 2.0 {
-                    n += 1;
-                    sum += e;
-                    bad05 += usize::from(e > 0.5);
-                }
-            }
-        }
-        eprintln!(
-            "venus: mean |err| {:.3} px, bad-0.5 among good {:.1} %",
-            sum / n as f64,
-            100.0 * bad05 as f64 / n as f64
-        );
-    }
-}
-
-/// The config of the ignored sweeps: 9..55 with `SGM_P1`/`SGM_P2` from the environment.
-fn sweep_config() -> StereoConfig {
-    let mut cfg = config(9, 55);
-    let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<u32>().ok());
-    cfg.sgm.p1 = env("SGM_P1").unwrap_or(cfg.sgm.p1);
-    cfg.sgm.p2 = env("SGM_P2").unwrap_or(cfg.sgm.p2);
-    cfg
-}
-
-#[test]
-#[ignore]
-fn flat_block_sweep() {
-    let (w, h) = (320, 120);
-    let (x0, x1) = (100, 200);
-    for sigma in [0.0f32, 1.0, 2.0, 3.0] {
-        for &(thr, r) in &[
-            (0.0f32, 3u32),
-            (0.25, 3),
-            (0.25, 5),
-            (0.3, 5),
-            (0.375, 3),
-            (0.5, 3),
-            (0.625, 3),
-            (0.75, 3),
-            (1.0, 3),
-        ] {
-            let mut line = format!("sigma {sigma} thr {thr} r {r}:");
-            for d_near in [24.0f32, 34.0] {
-                let mut pair = two_planes(w, h, 150, 20.0, d_near, 21);
-                flatten_region(&mut pair, x0, x1, 128);
-                pair = webcam(pair, 5);
-                degrade(&mut pair.left, w, 1.0, 0.0, sigma, 0, 6);
-                let mut m = SgmMatcher::from_config(&sweep_config())
-                    .expect("cfg")
-                    .with_texture(thr, r)
-                    .expect("t");
-                let out = run(&mut m, &pair);
-                let margin = 2 + r as usize + 1;
-                let inside: Vec<usize> = (0..h)
-                    .flat_map(|y| (x0 + margin..x1 - margin).map(move |x| y * w + x))
-                    .collect();
-                let valid = inside.iter().filter(|&&i| out[i] != 0).count();
-                let wrong = inside
-                    .iter()
-                    .filter(|&&i| {
-                        out[i] != 0 && (out[i] as f32 / 256.0 - pair.disparity_px[i]).abs() > 1.0
-                    })
-                    .count();
-                line += &format!(
-                    " valid {:.1}% wrong {:.1}%",
-                    100.0 * valid as f32 / inside.len() as f32,
-                    100.0 * wrong as f32 / inside.len() as f32
-                );
-            }
-            eprintln!("{line}");
-        }
-    }
-}
-
 /// Addresses of the main scratch buffers (to see that they are not reallocated).
 fn buffer_addresses(m: &SgmMatcher) -> Vec<usize> {
     let s = &m.scratch;
@@ -883,7 +703,7 @@ fn bad2(scene: &Scene, est: &[u16]) -> (f32, f32, f32) {
     )
 }
 
-fn run_scene(scene: &Scene, right: &[u8], cfg: &StereoConfig, texture: Option<f32>) -> Vec<u16> {
+fn run_scene(scene: &Scene, right: &[u8], cfg: &StereoConfig) -> Vec<u16> {
     let params = SgmParams {
         prefilter: std::env::var("SGM_PRE").map_or(true, |v| v != "0"),
         ..SgmParams::from_config(cfg)
@@ -891,13 +711,6 @@ fn run_scene(scene: &Scene, right: &[u8], cfg: &StereoConfig, texture: Option<f3
     let mut m = SgmMatcher::new(params)
         .expect("cfg")
         .with_simd(std::env::var("SGM_SIMD").is_err());
-    if let Some(t) = texture {
-        let r = std::env::var("SGM_TEXR")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(SgmConfig::default().texture_radius);
-        m = m.with_texture(t, r).expect("texture");
-    }
     let mut out = vec![0u16; scene.width * scene.height];
     let l = ImageView::new(&scene.left, scene.width, scene.height).expect("left");
     let r = ImageView::new(right, scene.width, scene.height).expect("right");
@@ -937,7 +750,7 @@ fn middlebury_sanity() {
             ("clean", scene.right.clone()),
             ("degraded", degraded_right(scene)),
         ] {
-            let out = run_scene(scene, &right, &cfg, None);
+            let out = run_scene(scene, &right, &cfg);
             let (b, dense, err) = bad2(scene, &out);
             eprintln!(
                 "{} {label}: bad-2 {:.1} % (density {:.1} %, error among valid {:.1} %)",
@@ -949,70 +762,6 @@ fn middlebury_sanity() {
             // Loose bounds: a regression guard, not a benchmark.
             assert!(err < 0.15, "{} {label}: {err}", scene.name);
             assert!(b < 0.40, "{} {label}: {b}", scene.name);
-        }
-    }
-}
-
-/// Penalty sweep on the Middlebury scenes (clean and degraded). Run with
-/// `cargo test --release -p hvs-stereo sgm::tests::tune -- --ignored --nocapture`.
-#[test]
-#[ignore]
-fn tune_penalties() {
-    let scenes: Vec<Scene> = ["tsukuba", "venus", "motorcycle"]
-        .iter()
-        .filter_map(|n| load_scene(n))
-        .collect();
-    let rights: Vec<Vec<u8>> = scenes.iter().map(degraded_right).collect();
-    let p2s: Vec<u32> = std::env::var("SGM_P2S")
-        .ok()
-        .map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
-        .unwrap_or_else(|| vec![16, 24, 32, 48, 64, 80, 96]);
-    let p1s: Vec<u32> = std::env::var("SGM_P1S")
-        .ok()
-        .map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
-        .unwrap_or_else(|| vec![2, 4, 6, 8, 12]);
-    let texture: Option<f32> = std::env::var("SGM_TEXTURE")
-        .ok()
-        .and_then(|s| s.parse().ok());
-    let paths: u32 = std::env::var("SGM_PATHS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(5);
-    for &p2 in &p2s {
-        for &p1 in &p1s {
-            if p1 > p2 {
-                continue;
-            }
-            let mut line = format!("p1 {p1:3} p2 {p2:3}:");
-            let mut total = 0.0;
-            for (scene, right) in scenes.iter().zip(&rights) {
-                let mut cfg = config(scene.min_disp, scene.max_disp);
-                cfg.sgm = hvs_runtime::config::SgmConfig {
-                    p1,
-                    p2,
-                    paths,
-                    ..Default::default()
-                };
-                let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<u32>().ok());
-                cfg.uniqueness_pct = env("SGM_UNIQ").unwrap_or(cfg.uniqueness_pct);
-                cfg.lr_check = env("SGM_LR").map_or(cfg.lr_check, |v| v != 0);
-                cfg.speckle_window_px = env("SGM_SPECKLE").unwrap_or(cfg.speckle_window_px);
-                for r in [&scene.right, right] {
-                    let out = run_scene(scene, r, &cfg, texture);
-                    let (b, dense, err) = bad2(scene, &out);
-                    total += b;
-                    line += &format!(
-                        " {:5.1}/{:4.1}/{:4.1}",
-                        100.0 * b,
-                        100.0 * dense,
-                        100.0 * err
-                    );
-                }
-            }
-            eprintln!(
-                "{line}  mean bad-2 {:.2}",
-                100.0 * total / (2 * scenes.len()) as f32
-            );
         }
     }
 }
