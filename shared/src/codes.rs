@@ -277,6 +277,47 @@ mod tests {
         );
     }
 
+    /// The `codes` cell of an enum's row in docs/ipc.md: `0 `STOP`, 1 `FWD`, ...`.
+    macro_rules! doc_cells {
+        ($($name:ident),+) => {
+            [$((
+                stringify!($name),
+                $name::ALL
+                    .iter()
+                    .map(|v| format!("{} `{}`", v.code(), v.label()))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            )),+]
+        };
+    }
+
+    #[test]
+    fn the_codes_section_of_docs_ipc_md_lists_every_code() {
+        let doc = include_str!("../../docs/ipc.md");
+        let rows = doc_cells!(
+            FrameSource,
+            StereoAlgorithm,
+            RowAlignState,
+            RangeSource,
+            MotionCommand,
+            IntersectionType,
+            SendReason,
+            StageHealth,
+            StageState,
+            ControlCommand
+        );
+        for (name, codes) in rows {
+            let row = doc
+                .lines()
+                .find(|l| l.starts_with(&format!("| `{name}` |")))
+                .unwrap_or_else(|| panic!("docs/ipc.md has no row for {name}"));
+            assert!(
+                row.ends_with(&format!("| {codes} |")),
+                "docs/ipc.md, {name}: {row}\nthe code says: {codes}"
+            );
+        }
+    }
+
     #[test]
     fn unknown_codes_read_as_the_safe_value_where_one_is_declared() {
         assert_eq!(MotionCommand::from_code(99), MotionCommand::Stop);
