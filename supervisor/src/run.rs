@@ -576,17 +576,12 @@ impl Supervisor {
     fn poll_heartbeats(&mut self) -> anyhow::Result<()> {
         for slot in &mut self.slots {
             slot.heartbeat.clear_events();
+            let beat_before = slot.last_heartbeat;
             while let Some(s) = slot.heartbeat.receive()? {
                 let hb = s.payload();
                 // Heartbeats of an earlier incarnation (history, or in flight) are not ours.
                 if hb.pid != slot.pid || slot.pid == 0 {
                     continue;
-                }
-                if slot
-                    .last_heartbeat
-                    .is_none_or(|t| t.elapsed() >= Duration::from_millis(50))
-                {
-                    slot.wait_at_heartbeat_ns = procstat::run_queue_wait_ns(slot.pid);
                 }
                 slot.last_heartbeat = Some(Instant::now());
                 slot.health = StageHealth::from_code(hb.health);
@@ -603,6 +598,11 @@ impl Supervisor {
                         slot.spawned_at.elapsed().as_millis()
                     );
                 }
+            }
+            // The run-queue wait at this stage's newest heartbeat: what the hang check takes
+            // off the silence that follows (one small /proc read per poll that saw a beat).
+            if slot.last_heartbeat != beat_before {
+                slot.wait_at_heartbeat_ns = procstat::run_queue_wait_ns(slot.pid);
             }
         }
         Ok(())

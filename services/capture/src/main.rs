@@ -93,7 +93,7 @@ fn run_sim_source(rt: &mut StageRuntime) -> Result<(), StageError> {
                 src,
                 hi_sample.payload_mut(),
                 lo_sample.payload_mut(),
-                monotonic_ns(),
+                monotonic_ns,
             )?;
             // The fast path first: it is the one the decisions wait for.
             // One pair in, one pair out (published at both resolutions).
@@ -184,7 +184,7 @@ impl PairPublisher {
                     times,
                     hi_sample.payload_mut(),
                     lo_sample.payload_mut(),
-                    monotonic_ns(),
+                    monotonic_ns,
                     fill,
                 )?;
                 // The fast path first: it is the one the decisions wait for.
@@ -195,7 +195,7 @@ impl PairPublisher {
             }
             None => {
                 self.writer
-                    .write_lo(times, lo_sample.payload_mut(), monotonic_ns(), fill)?;
+                    .write_lo(times, lo_sample.payload_mut(), monotonic_ns, fill)?;
                 rt.send_or_report(&mut self.lo, lo_sample, monotonic_ns() - times.received_ns);
             }
         }
@@ -665,7 +665,7 @@ fn publish_replayed<T>(
             return;
         }
     };
-    if let Err(e) = write_replayed(pair, sample.payload_mut(), rebase, monotonic_ns()) {
+    if let Err(e) = write_replayed(pair, sample.payload_mut(), rebase, monotonic_ns) {
         rt.report_error("replay", &e);
         return;
     }

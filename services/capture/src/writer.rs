@@ -133,13 +133,14 @@ impl PairWriter {
     }
 
     /// Writes the next pair at 640x480 into `hi` and its downscale into `lo`; `fill` writes
-    /// the grey images.
+    /// the grey images; `clock` (CLOCK_MONOTONIC ns) stamps `published_ns` once they are
+    /// written.
     pub fn write_hi<E>(
         &mut self,
         times: PairTimes,
         hi: &mut StereoFrame640x480,
         lo: &mut StereoFrame320x240,
-        published_ns: u64,
+        clock: impl Fn() -> u64,
         fill: impl FnOnce(&mut [u8], &mut [u8]) -> Result<(), E>,
     ) -> Result<(), WriteFailure<E>> {
         self.frame_id += 1;
@@ -147,39 +148,41 @@ impl PairWriter {
         downscale_2x(&hi.left, HI_WIDTH, HI_HEIGHT, &mut lo.left).map_err(WriteFailure::Convert)?;
         downscale_2x(&hi.right, HI_WIDTH, HI_HEIGHT, &mut lo.right)
             .map_err(WriteFailure::Convert)?;
+        let published_ns = clock();
         hi.header = self.header(times, HI_WIDTH, HI_HEIGHT, published_ns);
         lo.header = self.header(times, LO_WIDTH, LO_HEIGHT, published_ns);
         Ok(())
     }
 
-    /// Writes the next pair of a 320x240 capture into `lo`.
+    /// Writes the next pair of a 320x240 capture into `lo` (`clock` as for
+    /// [`Self::write_hi`]).
     pub fn write_lo<E>(
         &mut self,
         times: PairTimes,
         lo: &mut StereoFrame320x240,
-        published_ns: u64,
+        clock: impl Fn() -> u64,
         fill: impl FnOnce(&mut [u8], &mut [u8]) -> Result<(), E>,
     ) -> Result<(), WriteFailure<E>> {
         self.frame_id += 1;
         self.fill_images(&mut lo.left, &mut lo.right, fill)?;
-        lo.header = self.header(times, LO_WIDTH, LO_HEIGHT, published_ns);
+        lo.header = self.header(times, LO_WIDTH, LO_HEIGHT, clock());
         Ok(())
     }
 }
 
 /// Writes the simulator's 640x480 camera pair into `hi` (copied once) and its downscale into
-/// `lo`, keeping the simulator's header (ids, capture times) with the sizes and
-/// `published_ns` set.
+/// `lo`, keeping the simulator's header (ids, capture times) with the sizes set and
+/// `published_ns` read from `clock` once each image is written.
 pub fn write_sim_pair(
     src: &StereoFrame640x480,
     hi: &mut StereoFrame640x480,
     lo: &mut StereoFrame320x240,
-    published_ns: u64,
+    clock: impl Fn() -> u64,
 ) -> Result<(), ConvertError> {
     let header = |width: usize, height: usize| FrameHeader {
         width: width as u32,
         height: height as u32,
-        published_ns,
+        published_ns: clock(),
         ..src.header
     };
     hi.left.copy_from_slice(&src.left);
@@ -204,12 +207,12 @@ pub struct ReplaySizeMismatch {
 }
 
 /// Writes a recorded pair into `out` with its recorded header, its capture times moved by
-/// `rebase` (recorded time to now) and `published_ns` set.
+/// `rebase` (recorded time to now) and `published_ns` read from `clock` once written.
 pub fn write_replayed<T: StereoPayload>(
     pair: &ReplayPair,
     out: &mut T,
     rebase: impl Fn(u64) -> u64,
-    published_ns: u64,
+    clock: impl Fn() -> u64,
 ) -> Result<(), ReplaySizeMismatch> {
     let (header, left, right) = out.parts_mut();
     if left.len() != pair.left.len() || right.len() != pair.right.len() {
@@ -225,7 +228,7 @@ pub fn write_replayed<T: StereoPayload>(
         capture_ns: rebase(pair.header.capture_ns),
         left_capture_ns: rebase(pair.header.left_capture_ns),
         right_capture_ns: rebase(pair.header.right_capture_ns),
-        published_ns,
+        published_ns: clock(),
         ..pair.header
     };
     Ok(())
@@ -270,7 +273,7 @@ mod tests {
         let mut w = PairWriter::new(FrameSource::V4l2, None, (640, 480));
         let mut hi = Box::new(StereoFrame640x480::zeroed());
         let mut lo = Box::new(StereoFrame320x240::zeroed());
-        w.write_hi(times(), &mut hi, &mut lo, 3_000, gradient)
+        w.write_hi(times(), &mut hi, &mut lo, || 3_000, gradient)
             .map_err(|e| e.to_string())
             .expect("written");
         assert_eq!(w.frame_id(), 1);
@@ -287,7 +290,7 @@ mod tests {
             assert_eq!(h.published_ns, 3_000);
             assert_eq!(h.source, FrameSource::V4l2 as u32);
         }
-        w.write_hi(times(), &mut hi, &mut lo, 4_000, gradient)
+        w.write_hi(times(), &mut hi, &mut lo, || 4_000, gradient)
             .map_err(|e| e.to_string())
             .expect("written");
         assert_eq!((hi.header.frame_id, lo.header.frame_id), (2, 2));
@@ -297,12 +300,15 @@ mod tests {
     fn a_source_that_fails_is_reported_as_the_source_and_the_id_still_advances() {
         let mut w = PairWriter::new(FrameSource::Files, None, (320, 240));
         let mut lo = Box::new(StereoFrame320x240::zeroed());
-        let failed = w.write_lo(times(), &mut lo, 5, |_, _| {
-            Err(std::io::Error::other("unplugged"))
-        });
+        let failed = w.write_lo(
+            times(),
+            &mut lo,
+            || 5,
+            |_, _| Err(std::io::Error::other("unplugged")),
+        );
         assert!(matches!(failed, Err(WriteFailure::Source(ref e)) if e.to_string() == "unplugged"));
         // The id is spent: a lost pair shows as a gap downstream.
-        w.write_lo(times(), &mut lo, 6, gradient)
+        w.write_lo(times(), &mut lo, || 6, gradient)
             .map_err(|e| e.to_string())
             .expect("written");
         assert_eq!(lo.header.frame_id, 2);
@@ -317,7 +323,7 @@ mod tests {
         src.header.capture_ns = 123;
         let mut hi = Box::new(StereoFrame640x480::zeroed());
         let mut lo = Box::new(StereoFrame320x240::zeroed());
-        write_sim_pair(&src, &mut hi, &mut lo, 999).expect("written");
+        write_sim_pair(&src, &mut hi, &mut lo, || 999).expect("written");
         assert_eq!(&hi.left[..], &src.left[..]);
         assert_eq!((lo.header.frame_id, lo.header.capture_ns), (77, 123));
         assert_eq!(
@@ -343,7 +349,7 @@ mod tests {
             right: vec![9; LO_WIDTH * LO_HEIGHT],
         };
         let mut lo = Box::new(StereoFrame320x240::zeroed());
-        write_replayed(&pair, &mut *lo, rebase_to(5_000, 80_000), 90_000).expect("fits");
+        write_replayed(&pair, &mut *lo, rebase_to(5_000, 80_000), || 90_000).expect("fits");
         assert_eq!((lo.left[0], lo.right[LO_WIDTH * LO_HEIGHT - 1]), (7, 9));
         let h = lo.header;
         assert_eq!((h.frame_id, h.replay_hi_frame_id), (41, 40));
@@ -352,7 +358,7 @@ mod tests {
             (80_000, 80_100, 90_000)
         );
         let mut hi = Box::new(StereoFrame640x480::zeroed());
-        let err = write_replayed(&pair, &mut *hi, |t| t, 0).expect_err("a 320x240 pair");
+        let err = write_replayed(&pair, &mut *hi, |t| t, || 0).expect_err("a 320x240 pair");
         assert_eq!(err.expected, HI_WIDTH * HI_HEIGHT);
         assert!(err.to_string().contains("frame 41"), "{err}");
     }
