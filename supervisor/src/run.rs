@@ -5,9 +5,6 @@
 //! status period print one line and publish the status table. A stage is only ever started,
 //! stopped or restarted on its own: the others keep their processes.
 
-use std::fs::File;
-use std::io::Write;
-use std::os::fd::AsRawFd;
 use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::time::{Duration, Instant};
@@ -15,7 +12,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use bytemuck::Zeroable;
 use hvs_runtime::clock::monotonic_ns;
-use hvs_runtime::config::{CaptureSource, HvsConfig, StageSpec, run_dir};
+use hvs_runtime::config::{CaptureSource, HvsConfig, StageSpec};
 use hvs_runtime::ipc::{IpcNode, TopicPublisher, TopicSubscriber};
 use hvs_runtime::stats::LatencyWindow;
 use hvs_shared::messages::{
@@ -30,6 +27,12 @@ use crate::policy::{self, ExitVerdict, RestartHistory};
 use crate::process::{self, Launch};
 use crate::procstat::{self, ProcSample};
 use crate::report::{LatencyReport, RunReport, SimReport, StageReport};
+
+mod lock;
+mod recording;
+
+use lock::InstanceLock;
+use recording::{Recorder, check_recording};
 
 /// Supervisor loop period.
 const TICK: Duration = Duration::from_millis(20);
@@ -52,79 +55,6 @@ pub struct RunOptions {
     pub replay: Option<PathBuf>,
     /// Record the run (`hvs probe record`'s default topics) from before the first frame.
     pub record: Option<PathBuf>,
-}
-
-/// Checks, before any stage starts, that `path` is there and starts like an MCAP file (the
-/// capture stage reads it).
-fn check_recording(path: &Path) -> anyhow::Result<PathBuf> {
-    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-    if let Err(e) = hvs_capture::replay::check_magic(&abs) {
-        bail!(
-            "--replay {}: {e}; record one with `hvs run --record` or `hvs probe record`",
-            path.display()
-        );
-    }
-    Ok(abs)
-}
-
-/// The recorder child of `hvs run --record`: `hvs probe record` started before the stages.
-struct Recorder {
-    child: Child,
-    out: PathBuf,
-}
-
-impl Recorder {
-    /// Starts the recorder and waits until it has subscribed to every topic.
-    fn start(instance: &str, out: &Path) -> anyhow::Result<Self> {
-        let exe = std::env::current_exe().context("cannot locate the hvs executable")?;
-        let ready = run_dir(instance).join("recorder.ready");
-        let _ = std::fs::remove_file(&ready);
-        let mut cmd = std::process::Command::new(exe);
-        cmd.args(["probe", "record", "--instance", instance, "--create-topics"])
-            .arg("--out")
-            .arg(out)
-            .arg("--ready-file")
-            .arg(&ready);
-        let mut child = process::spawn_child("record", cmd, 0)?;
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while !ready.exists() {
-            if let Ok(Some(status)) = child.try_wait() {
-                bail!(
-                    "--record {}: the recorder exited before it started ({})",
-                    out.display(),
-                    describe_exit(process::exit_code(&status))
-                );
-            }
-            if Instant::now() > deadline {
-                process::terminate(&mut child, Duration::from_secs(1));
-                bail!(
-                    "--record {}: the recorder did not subscribe within 10 s",
-                    out.display()
-                );
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        let _ = std::fs::remove_file(&ready);
-        tracing::info!("hvs: recording to {}", out.display());
-        Ok(Self {
-            child,
-            out: out.to_path_buf(),
-        })
-    }
-
-    /// Stops it (SIGTERM: it closes the file with its summary) after the stages stopped.
-    fn stop(mut self) {
-        match process::terminate(&mut self.child, Duration::from_secs(30)) {
-            Some(s) if s.success() => {}
-            status => tracing::warn!(
-                "hvs: the recorder of {} ended with {}",
-                self.out.display(),
-                status.map_or("no status".to_string(), |s| describe_exit(
-                    process::exit_code(&s)
-                ))
-            ),
-        }
-    }
 }
 
 /// Counters of a stage, summed over its incarnations.
@@ -199,45 +129,6 @@ impl Slot {
 
     fn cpu_s(&self) -> f64 {
         self.cpu_s_past + self.proc_now.map_or(0.0, |s| s.cpu_s)
-    }
-}
-
-/// Holds the per-instance lock file: one supervisor per instance.
-struct InstanceLock {
-    _file: File,
-    path: PathBuf,
-}
-
-impl InstanceLock {
-    fn acquire(instance: &str) -> anyhow::Result<Self> {
-        let dir = run_dir(instance);
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("cannot create run folder {}", dir.display()))?;
-        let path = dir.join("supervisor.lock");
-        let mut file = std::fs::OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .read(true)
-            .write(true)
-            .open(&path)
-            .with_context(|| format!("cannot open lock file {}", path.display()))?;
-        // SAFETY: plain flock on a file descriptor we own.
-        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
-            let other = std::fs::read_to_string(&path).unwrap_or_default();
-            bail!(
-                "instance {instance:?} already has a running supervisor (pid {}); use `hvs stop --instance {instance}` or another --instance",
-                other.trim()
-            );
-        }
-        file.set_len(0)?;
-        write!(file, "{}", std::process::id())?;
-        Ok(Self { _file: file, path })
-    }
-}
-
-impl Drop for InstanceLock {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
     }
 }
 
