@@ -244,12 +244,47 @@ enum SimCommand {
         /// Local occupancy map on or off (default: the config's decision.local_map).
         #[arg(long, value_parser = ["on", "off"])]
         local_map: Option<String>,
+        /// Wall contrast 0..1, overriding the map's @wall_contrast: 1 the full wall texture,
+        /// 0 plain painted walls (only the camera's noise on them).
+        #[arg(long, value_name = "C")]
+        wall_contrast: Option<f64>,
+        /// Wheel slip and speed errors of the realistic preset (2 % wheel scale errors, 3 %
+        /// speed variation, 5 % of each turn in place lost), overriding [sim.motion]: dead
+        /// reckoning then drifts.
+        #[arg(long)]
+        motion_noise: bool,
+        /// Seed of the images' and the motion's noise (default: the config's sim.seed).
+        #[arg(long, value_name = "N")]
+        seed: Option<u64>,
+        /// Drive a maze generated in memory from this seed (as `hvs sim maze --seed N`)
+        /// instead of a map file.
+        #[arg(long, value_name = "N", conflicts_with = "map")]
+        maze_seed: Option<u64>,
         /// Config file (default: config/sim.toml).
         #[arg(long, value_name = "FILE")]
         config: Option<PathBuf>,
-        /// Print JSON.
+        /// Print JSON (with coverage_pct, explored_s, coverage_curve and cells_per_m).
         #[arg(long)]
         json: bool,
+    },
+    /// Generate a random maze map: square rooms and corridor slots 2.45 m across on 0.175 m
+    /// cells, joined by doorways 0.7 to 1.05 m wide, with loops, at least one dead-end
+    /// corridor, free-standing pillars in some rooms, walls 0.35 m thick all round, and a
+    /// start marker in a room with room to turn. Every floor cell is reachable from the
+    /// start. The same seed always gives the same maze. The default 4x4 slots make
+    /// 11.55 m x 11.55 m, the size of config/maps/maze.txt; `hvs sim drive --map FILE` drives it
+    /// (or `hvs sim drive --maze-seed N` without writing a file).
+    #[command(verbatim_doc_comment)]
+    Maze {
+        /// Seed.
+        #[arg(long, value_name = "N")]
+        seed: u64,
+        /// Output map file (default: standard output).
+        #[arg(long, value_name = "FILE")]
+        out: Option<PathBuf>,
+        /// Slots across x down, 2 to 16 each (each 2.45 m plus a 0.35 m wall).
+        #[arg(long, value_name = "WxH", default_value = "4x4")]
+        rooms: String,
     },
 }
 
@@ -592,6 +627,10 @@ fn main() -> ExitCode {
                     rate_hz,
                     memory,
                     local_map,
+                    wall_contrast,
+                    motion_noise,
+                    seed,
+                    maze_seed,
                     config,
                     json,
                 },
@@ -608,9 +647,19 @@ fn main() -> ExitCode {
                 rate_hz,
                 visit_memory: memory.map(|m| m == "on"),
                 local_map: local_map.map(|m| m == "on"),
+                wall_contrast,
+                motion_noise: motion_noise.then(hvs_sim::SimMotionNoise::realistic),
+                seed,
+                maze: maze_seed.map(|seed| hvs_sim::MazeOptions {
+                    seed,
+                    ..hvs_sim::MazeOptions::default()
+                }),
             };
             drive::run(&config, &opts, json)
         })(),
+        Command::Sim {
+            what: SimCommand::Maze { seed, out, rooms },
+        } => drive::maze(seed, out.as_deref(), &rooms),
         Command::Bench { what } => match what {
             BenchCommand::Ipc { count, rate } => bench::run_ipc(count, rate),
             BenchCommand::Stereo {

@@ -8,6 +8,9 @@
 //!   rule ([`fuzzy_memberships`]), smoothed over frames with hysteresis; turns executed to the
 //!   reference's `acos` angle by dead reckoning and followed by a committed stretch ahead;
 //!   at a junction the least visited legal branch ([`VisitGrid`]);
+//! * `explore`: frontier exploration in Nav2's layers (occupancy grid with drift correction,
+//!   costmap, frontiers, planner, path follower, progress checker and recovery behaviours;
+//!   [`explore`]), every number in `[nav]`;
 //! * `mean-estimation` and `threshold-estimation`: the two literature methods the reference
 //!   cites, on the fused windows ([`mean_estimation`], [`threshold_estimation`]).
 //!
@@ -16,6 +19,7 @@
 //! state in which the way ahead is open but a side is undecided (its smoothed membership is
 //! inside the fuzzy band): keep going straight until it resolves.
 
+pub mod explore;
 pub mod local_map;
 pub mod odometry;
 pub mod ordering;
@@ -36,7 +40,7 @@ use std::cell::Cell;
 use std::collections::{HashMap, HashSet};
 
 use hvs_runtime::config::{
-    DecisionConfig, DecisionPolicy, PulseTable, RobotConfig, WallThresholds,
+    DecisionConfig, DecisionPolicy, NavConfig, PulseTable, RobotConfig, WallThresholds,
 };
 use hvs_shared::messages::{
     IntersectionType, MotionCommand, ObstacleScan, RangeSource, RangeWindow,
@@ -57,6 +61,8 @@ pub enum Policy {
     MeanEstimation = 3,
     /// Threshold estimation.
     ThresholdEstimation = 4,
+    /// Frontier exploration on an occupancy grid (`[nav]`).
+    Explore = 5,
 }
 
 impl Policy {
@@ -67,6 +73,7 @@ impl Policy {
             DecisionPolicy::Fuzzy => Self::Fuzzy,
             DecisionPolicy::MeanEstimation => Self::MeanEstimation,
             DecisionPolicy::ThresholdEstimation => Self::ThresholdEstimation,
+            DecisionPolicy::Explore => Self::Explore,
         }
     }
 }

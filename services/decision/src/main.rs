@@ -20,7 +20,9 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let mut decisions = rt.node.publisher(&topics::DECISIONS)?;
     let cfg = rt.config.decision.clone();
     let mut nav = Navigator::new(&cfg, &rt.config.robot, &rt.config.actuator.pulses)
-        .with_camera_forward_m(rt.config.camera.forward_m);
+        .with_camera_forward_m(rt.config.camera.forward_m)
+        .with_nav(&rt.config.nav, &rt.config.robot, &rt.config.actuator.pulses)
+        .with_matcher_reach(rt.config.stereo.lo.max_disp, 320);
     let policy = Policy::of(cfg.policy);
     tracing::info!(
         "{:?} policy, side wall < {:.3} m, front wall < {:.3} m (640x480: {:.3} / {:.3} m), visit memory {}",

@@ -161,6 +161,12 @@ impl Odometry {
         self.pose.heading_rad += delta_rad;
     }
 
+    /// Moves the pose estimate by `(dx_m, dy_m)` (a fix from aligning a scan to the map).
+    pub fn correct_position(&mut self, dx_m: f64, dy_m: f64) {
+        self.pose.x_m += dx_m;
+        self.pose.y_m += dy_m;
+    }
+
     /// Distance driven (forwards or backwards), metres.
     pub fn distance_m(&self) -> f64 {
         self.distance_m

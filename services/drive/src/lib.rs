@@ -9,6 +9,14 @@
 //! stage processes; only the iceoryx2 hops and the 640x480 worker are left out (the fast path
 //! alone drives), so that minutes of driving take seconds and are repeatable. Used by the
 //! closed-loop tests and to measure coverage with and without the visit memory.
+//!
+//! The report counts, besides collisions and distance, how much of the map the camera saw
+//! ([`coverage`]: the reachable floor cells whose centre was within 2 m, in the field of view
+//! and in sight) and when. The options can make the drive harder than the config: plain
+//! walls (`wall_contrast`), wheel slip (`motion_noise`, which makes dead reckoning drift),
+//! another seed, or a freshly generated maze (`maze`, [`hvs_sim::maze`]).
+
+pub mod coverage;
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
@@ -18,7 +26,10 @@ use hvs_decision::Navigator;
 use hvs_fusion::FusionPath;
 use hvs_runtime::config::HvsConfig;
 use hvs_shared::messages::{IntersectionType, MotionCommand, RangeSource};
-use hvs_sim::{GridMap, MapError, Pose, SimConfig, SimRenderError, SimWorld, lock_psc};
+use hvs_sim::{
+    GridMap, MapError, MazeError, MazeOptions, Pose, SimConfig, SimMotionNoise, SimRenderError,
+    SimWorld, generate_maze, lock_psc,
+};
 use hvs_stereo::{ImageView, StereoError, matcher_for};
 
 /// Why a drive could not run.
@@ -47,13 +58,18 @@ pub enum DriveError {
     /// The simulator could not render a frame.
     #[error("rendering")]
     Render(#[from] SimRenderError),
+    /// The maze could not be generated.
+    #[error("maze")]
+    Maze(#[from] MazeError),
 }
 
 /// What `hvs sim drive` runs.
 #[derive(Debug, Clone)]
 pub struct DriveOptions {
-    /// Map file (`None`: the config's `sim.map`).
+    /// Map file (`None`: the config's `sim.map`, unless `maze` is given).
     pub map: Option<PathBuf>,
+    /// Drive a maze generated in memory instead of a map file (not with `map`).
+    pub maze: Option<MazeOptions>,
     /// Start pose (default: the map's).
     pub pose: Option<Pose>,
     /// Simulated seconds.
@@ -64,6 +80,14 @@ pub struct DriveOptions {
     pub visit_memory: Option<bool>,
     /// Local occupancy map on or off (`None`: the config's `decision.local_map`).
     pub local_map: Option<bool>,
+    /// Wall contrast, 0..=1 (`None`: the map's `@wall_contrast`, 1 without one): 0 gives
+    /// plain painted walls, with only the camera's noise on them.
+    pub wall_contrast: Option<f64>,
+    /// Wheel slip and speed errors (`None`: the config's `[sim.motion]`);
+    /// [`SimMotionNoise::realistic`] is `hvs sim drive --motion-noise`.
+    pub motion_noise: Option<SimMotionNoise>,
+    /// Seed of the images' and the motion's noise (`None`: the config's `sim.seed`).
+    pub seed: Option<u64>,
 }
 
 /// Decisions per simulated second by default (the camera's rate).
@@ -80,9 +104,19 @@ impl Default for DriveOptions {
             rate_hz: DEFAULT_RATE_HZ,
             visit_memory: None,
             local_map: None,
+            wall_contrast: None,
+            motion_noise: None,
+            seed: None,
+            maze: None,
         }
     }
 }
+
+/// Simulated seconds between two points of [`DriveReport::coverage_curve`].
+pub const COVERAGE_SAMPLE_S: f64 = 30.0;
+
+/// Coverage at which a map counts as explored ([`DriveReport::explored_s`]), percent.
+pub const EXPLORED_PCT: f64 = 95.0;
 
 /// The outcome of a drive.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -121,6 +155,32 @@ pub struct DriveReport {
     pub commands: BTreeMap<String, u64>,
     /// Wall-clock seconds the drive took.
     pub wall_s: f64,
+    /// Share of the map's reachable floor cells (4-connected to the start cell) the camera
+    /// saw, percent: the cell's centre within 2 m of the camera, inside its horizontal field
+    /// of view and in its line of sight, at some frame (sim ground truth, [`coverage`]).
+    #[serde(default)]
+    pub coverage_pct: f64,
+    /// Reachable floor cells of the map (what `coverage_pct` is a share of).
+    #[serde(default)]
+    pub reachable_cells: usize,
+    /// Simulated seconds at which the coverage first reached 95 % (`None`: never).
+    #[serde(default)]
+    pub explored_s: Option<f64>,
+    /// `(simulated seconds, coverage_pct)` every 30 simulated seconds, and at the end.
+    #[serde(default)]
+    pub coverage_curve: Vec<(f64, f64)>,
+    /// `distinct_cells / distance_m` (0 when the robot did not move).
+    #[serde(default)]
+    pub cells_per_m: f64,
+    /// The wall contrast driven with (0 plain paint .. 1 the full texture).
+    #[serde(default)]
+    pub wall_contrast: f64,
+    /// Whether the robot's wheels slipped (`[sim.motion]` or `motion_noise` on).
+    #[serde(default)]
+    pub motion_noise: bool,
+    /// Seed of the images' and the motion's noise.
+    #[serde(default)]
+    pub seed: u64,
 }
 
 /// Runs a drive.
@@ -137,20 +197,41 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
             message: format!("{} must be in (0, 7200] seconds", opts.duration_s),
         });
     }
-    let map_path = opts
-        .map
-        .clone()
-        .unwrap_or_else(|| config.resolve_path(&config.sim.map));
-    let map = GridMap::load(&map_path).map_err(|source| DriveError::Map {
-        path: map_path.clone(),
-        source: Box::new(source),
-    })?;
+    if let Some(c) = opts.wall_contrast
+        && !(0.0..=1.0).contains(&c)
+    {
+        return Err(DriveError::Option {
+            option: "--wall-contrast",
+            message: format!("{c} must be in 0..=1"),
+        });
+    }
+    if let Some(m) = &opts.motion_noise {
+        m.validate().map_err(|e| DriveError::Option {
+            option: "--motion-noise",
+            message: format!("{} {}", e.key, e.message),
+        })?;
+    }
+    let mut map = load_map(config, opts)?;
+    if let Some(c) = opts.wall_contrast {
+        map.set_wall_contrast(c);
+    }
     let (w, h) = (320usize, 240usize);
     let start = opts.pose.unwrap_or_else(|| map.start_pose());
     let map_name = map.name().to_string();
     let cell_m = map.cell_m();
-    let mut world = SimWorld::new(map, SimConfig::from_hvs(config, w, h));
+    let wall_contrast = map.wall_contrast();
+    let mut sim_config = SimConfig::from_hvs(config, w, h);
+    if let Some(m) = opts.motion_noise {
+        sim_config.motion = m;
+    }
+    if let Some(seed) = opts.seed {
+        sim_config.seed = seed;
+    }
+    let mut world = SimWorld::new(map, sim_config);
     world.set_pose(start);
+    let mut seen = coverage::Coverage::for_rig(world.map(), &start, world.rig());
+    let mut coverage_curve = Vec::new();
+    let mut explored_s = None;
     let mut matcher = matcher_for(&config.stereo.lo)?;
     let mut fusion = FusionPath::new(config, w, h, RangeSource::Lo);
     let mut decision_cfg = config.decision.clone();
@@ -161,7 +242,9 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
         decision_cfg.local_map = m;
     }
     let mut nav = Navigator::new(&decision_cfg, &config.robot, &config.actuator.pulses)
-        .with_camera_forward_m(config.camera.forward_m);
+        .with_camera_forward_m(config.camera.forward_m)
+        .with_nav(&config.nav, &config.robot, &config.actuator.pulses)
+        .with_matcher_reach(config.stereo.lo.max_disp, w as u32);
     let mut commander = Commander::new(&config.actuator);
     let psc = world.psc();
 
@@ -182,6 +265,12 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
     for step in 0..steps {
         let t = step as f64 * dt;
         world.render(t, &mut left, &mut right, None)?;
+        // What this frame shows: the camera at the left image's pose.
+        let camera = coverage::camera_pose(&world.pose_at(t), world.rig());
+        seen.observe(world.map(), &camera);
+        if explored_s.is_none() && seen.pct() >= EXPLORED_PCT {
+            explored_s = Some(t);
+        }
         let lv = ImageView::new(&left, w, h)?;
         let rv = ImageView::new(&right, w, h)?;
         matcher.compute(lv, rv, &mut disparity)?;
@@ -224,6 +313,12 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
                 nd.pose.y_m,
                 nav.local_map().ascii(nd.pose.x_m, nd.pose.y_m, 2.0, now)
             );
+            if let Some(e) = nav.explorer() {
+                eprintln!(
+                    "explorer grid:\n{}",
+                    e.grid().ascii(nd.pose.x_m, nd.pose.y_m, 4.0)
+                );
+            }
         }
         *intersections
             .entry(nd.intersection.label().to_string())
@@ -262,19 +357,32 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
             (p.x_m / cell_m).floor() as i64,
             (p.y_m / cell_m).floor() as i64,
         ));
+        // A point of the curve at every multiple of 30 s (the frames before it counted).
+        let sample_t = (coverage_curve.len() + 1) as f64 * COVERAGE_SAMPLE_S;
+        if (step + 1) as f64 * dt >= sample_t - 1e-9 {
+            coverage_curve.push((sample_t, seen.pct()));
+        }
+    }
+    let duration_s = steps as f64 * dt;
+    if coverage_curve
+        .last()
+        .is_none_or(|&(t, _)| (t - duration_s).abs() > 1e-9)
+    {
+        coverage_curve.push((duration_s, seen.pct()));
     }
     let end = world.pose();
     let delta = end.position() - start.position();
     let truth = world.ground_truth();
+    let distance_m = truth.odometer_m;
     Ok(DriveReport {
         map: map_name,
-        duration_s: steps as f64 * dt,
+        duration_s,
         decisions: steps,
         visit_memory: decision_cfg.visit_memory,
         local_map: decision_cfg.local_map,
         collisions: truth.collisions,
         distinct_cells: cells.len(),
-        distance_m: truth.odometer_m,
+        distance_m,
         start: (start.x_m, start.y_m, start.heading_deg()),
         end: (end.x_m, end.y_m, end.heading_deg()),
         end_ahead_m: delta.dot(start.forward()),
@@ -284,5 +392,46 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
         first_turn,
         commands,
         wall_s: started.elapsed().as_secs_f64(),
+        coverage_pct: seen.pct(),
+        reachable_cells: seen.reachable_cells(),
+        explored_s,
+        coverage_curve,
+        cells_per_m: if distance_m > 1e-9 {
+            cells.len() as f64 / distance_m
+        } else {
+            0.0
+        },
+        wall_contrast,
+        motion_noise: world.robot().motion_noise().is_some(),
+        seed: sim_config.seed,
     })
 }
+
+/// The map to drive: the generated maze, the map file given, or the config's.
+fn load_map(config: &HvsConfig, opts: &DriveOptions) -> Result<GridMap, DriveError> {
+    if let Some(maze) = &opts.maze {
+        if opts.map.is_some() {
+            return Err(DriveError::Option {
+                option: "--maze-seed",
+                message: "and --map cannot both be given".to_string(),
+            });
+        }
+        let m = generate_maze(maze)?;
+        let name = format!("maze-{}", maze.seed);
+        return GridMap::parse(&m.text, &name).map_err(|source| DriveError::Map {
+            path: PathBuf::from(name),
+            source: Box::new(source),
+        });
+    }
+    let map_path = opts
+        .map
+        .clone()
+        .unwrap_or_else(|| config.resolve_path(&config.sim.map));
+    GridMap::load(&map_path).map_err(|source| DriveError::Map {
+        path: map_path.clone(),
+        source: Box::new(source),
+    })
+}
+
+#[cfg(test)]
+mod tests;

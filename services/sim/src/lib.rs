@@ -10,6 +10,8 @@
 
 pub mod defects;
 pub mod map;
+pub mod maze;
+pub mod noise;
 pub mod pngio;
 pub mod psc;
 pub mod pty;
@@ -20,6 +22,8 @@ pub mod world;
 
 pub use defects::{DefectsError, SimRng, WebcamDefects, sim_rng};
 pub use map::{Face, GridMap, MapError, Pose, PoseParseError, RayHit, Vec2};
+pub use maze::{MazeError, MazeOptions, generate_maze};
+pub use noise::{SimMotionNoise, WheelNoise};
 pub use pngio::{PngError, RenderSize, RenderToDirError, RenderedFiles, render_to_dir};
 pub use psc::{
     PscCommand, PscCounters, PscEmulator, PscEvent, PscParser, SerialMismatch, SerialSettings,

@@ -6,6 +6,7 @@
 //! ; comment lines start with ';'
 //! @name straight hallway      (optional, before the grid)
 //! @cell_m 0.35                (optional cell edge in metres, default 0.5)
+//! @wall_contrast 1            (optional, 0..1: 1 the full wall texture, 0 plain paint)
 //! #######
 //! #..>..#
 //! #######
@@ -31,6 +32,20 @@ use std::str::FromStr;
 
 /// Default cell edge length in metres when the map has no `@cell_m` directive.
 pub const DEFAULT_CELL_M: f64 = 0.5;
+
+/// Wall contrast when the map has no `@wall_contrast` directive: the full texture.
+pub const DEFAULT_WALL_CONTRAST: f64 = 1.0;
+
+/// The value of `@wall_contrast`, or why it is bad.
+fn parse_wall_contrast(value: &str) -> Result<f64, &'static str> {
+    let v: f64 = value
+        .parse()
+        .map_err(|_| "not a number (expected 0 to 1, e.g. 0.5)")?;
+    if !(0.0..=1.0).contains(&v) {
+        return Err("contrast must be between 0 (plain paint) and 1 (the full texture)");
+    }
+    Ok(v)
+}
 
 /// A 2-D vector or point in the world frame (metres when it is a point).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -318,7 +333,7 @@ pub enum MapError {
     },
     /// A directive that the format does not know.
     #[error(
-        "{source_name}:{line}:1: unknown directive @{directive} (known: @cell_m, @name, @start)"
+        "{source_name}:{line}:1: unknown directive @{directive} (known: @cell_m, @name, @start, @wall_contrast)"
     )]
     UnknownDirective {
         /// File or source name.
@@ -350,6 +365,8 @@ pub struct GridMap {
     walls: Vec<bool>,
     start: Pose,
     seed: u64,
+    /// Contrast of the wall texture around its mean, 0..=1 (`@wall_contrast`).
+    wall_contrast: f64,
 }
 
 impl fmt::Debug for GridMap {
@@ -390,6 +407,7 @@ impl GridMap {
         let src = || source_name.to_string();
         let mut name = String::new();
         let mut cell_m = DEFAULT_CELL_M;
+        let mut wall_contrast = DEFAULT_WALL_CONTRAST;
         // (line number, text) of grid lines, top first.
         let mut rows: Vec<(usize, &str)> = Vec::new();
         let mut directive_start: Option<(usize, f64, f64, f64)> = None;
@@ -431,6 +449,9 @@ impl GridMap {
                             return Err(bad("cell edge must be between 0.01 and 10 m"));
                         }
                         cell_m = v;
+                    }
+                    "wall_contrast" => {
+                        wall_contrast = parse_wall_contrast(value).map_err(bad)?;
                     }
                     "name" => {
                         if value.is_empty() {
@@ -527,6 +548,7 @@ impl GridMap {
             walls,
             start: Pose::default(),
             seed: 0,
+            wall_contrast,
         };
         map.start = match (marker, directive_start) {
             (Some((ml, mc, ..)), Some((dl, ..))) => {
@@ -604,6 +626,21 @@ impl GridMap {
     /// The start pose (cell centre of the marker, or the `@start` pose).
     pub fn start_pose(&self) -> Pose {
         self.start
+    }
+
+    /// Contrast of the wall texture around its mean (`@wall_contrast`, default 1): 1 is the
+    /// full procedural texture, 0 plain paint (one flat grey per wall run), in between the
+    /// texture's deviations from its mean scaled by it.
+    pub fn wall_contrast(&self) -> f64 {
+        self.wall_contrast
+    }
+
+    /// Sets the wall contrast (clamped to 0..=1; a NaN leaves it as it is). Set it before
+    /// building a renderer or world from the map: they keep a copy.
+    pub fn set_wall_contrast(&mut self, contrast: f64) {
+        if !contrast.is_nan() {
+            self.wall_contrast = contrast.clamp(0.0, 1.0);
+        }
     }
 
     /// A deterministic seed derived from the map's name, cell size and walls (for textures).
@@ -795,187 +832,4 @@ impl GridMap {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    const BOX: &str = "@cell_m 1\n#####\n#...#\n#.>.#\n#...#\n#####\n";
-
-    fn parse_err(text: &str) -> MapError {
-        match GridMap::parse(text, "t.txt") {
-            Ok(m) => panic!("expected an error, parsed {m:?}"),
-            Err(e) => e,
-        }
-    }
-
-    #[test]
-    fn parses_box_and_frame() {
-        let m = GridMap::parse(BOX, "box").unwrap();
-        assert_eq!(m.width_cells(), 5);
-        assert_eq!(m.height_cells(), 5);
-        assert_eq!(m.cell_m(), 1.0);
-        let s = m.start_pose();
-        assert_eq!((s.x_m, s.y_m, s.heading_rad), (2.5, 2.5, 0.0));
-        assert!(m.is_wall_at(0.5, 0.5));
-        assert!(!m.is_wall_at(1.5, 1.5));
-        assert!(m.is_wall_at(-0.1, 2.5));
-        assert!(m.is_wall_at(2.5, 5.1));
-    }
-
-    #[test]
-    fn top_line_is_north_and_rows_may_be_short() {
-        // Floor only in the top-left corner region; the short row is padded with wall.
-        let m = GridMap::parse("@cell_m 0.5\n#.^\n#\n###", "t").unwrap();
-        assert_eq!(m.width_cells(), 3);
-        assert_eq!(m.height_cells(), 3);
-        // Text row 0 is the north row: y in [1.0, 1.5).
-        assert!(!m.is_wall_at(0.75, 1.25));
-        assert!(m.is_wall_at(0.75, 0.75)); // padded cell
-        let s = m.start_pose();
-        assert!((s.x_m - 1.25).abs() < 1e-12 && (s.y_m - 1.25).abs() < 1e-12);
-        assert!((s.heading_deg() - 90.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn markers_give_headings() {
-        for (ch, deg) in [('>', 0.0), ('^', 90.0), ('<', 180.0), ('v', 270.0)] {
-            let m = GridMap::parse(&format!("###\n#{ch}#\n###"), "t").unwrap();
-            assert!((m.start_pose().heading_deg() - deg).abs() < 1e-9, "{ch}");
-        }
-    }
-
-    #[test]
-    fn errors_name_line_and_column() {
-        match parse_err("; c\n@name x\n###\n#.x>#\n###") {
-            MapError::UnknownChar { line, col, ch, .. } => assert_eq!((line, col, ch), (4, 3, 'x')),
-            e => panic!("{e}"),
-        }
-        let e = parse_err("###\n#>.\n#.<\n###");
-        match &e {
-            MapError::MultipleStarts {
-                line,
-                col,
-                first_line,
-                first_col,
-                ..
-            } => assert_eq!((*line, *col, *first_line, *first_col), (3, 3, 2, 2)),
-            e => panic!("{e}"),
-        }
-        assert!(e.to_string().starts_with("t.txt:3:3:"), "{e}");
-        assert!(matches!(parse_err("###\n#..\n"), MapError::NoStart { .. }));
-        assert!(matches!(parse_err("; only\n\n"), MapError::Empty { .. }));
-        assert!(matches!(parse_err(""), MapError::Empty { .. }));
-        match parse_err("@cell_m  abc\n#>#") {
-            MapError::BadDirective {
-                line, col, value, ..
-            } => {
-                assert_eq!((line, col, value.as_str()), (1, 10, "abc"))
-            }
-            e => panic!("{e}"),
-        }
-        assert!(matches!(
-            parse_err("@cell_m -1\n#>#"),
-            MapError::BadDirective { .. }
-        ));
-        assert!(matches!(
-            parse_err("@foo 1\n#>#"),
-            MapError::UnknownDirective { line: 1, .. }
-        ));
-        assert!(matches!(
-            parse_err("#>#\n@cell_m 1"),
-            MapError::DirectiveAfterGrid { line: 2, .. }
-        ));
-        match parse_err("@cell_m 1\n@start 0.5 0.5 0\n###\n#..\n###") {
-            MapError::StartOnWall { line, .. } => assert_eq!(line, 2),
-            e => panic!("{e}"),
-        }
-        assert!(matches!(
-            parse_err("@start 1.2 0.7 0\n###\n#>.\n###"),
-            MapError::MultipleStarts { .. }
-        ));
-    }
-
-    #[test]
-    fn start_directive_gives_exact_pose() {
-        let m =
-            GridMap::parse("@cell_m 1\n@start 1.2 1.7 45\n####\n#..#\n#..#\n####", "t").unwrap();
-        let s = m.start_pose();
-        assert_eq!((s.x_m, s.y_m), (1.2, 1.7));
-        assert!((s.heading_deg() - 45.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn load_names_missing_file() {
-        let e = GridMap::load("/nonexistent/dir/map.txt").unwrap_err();
-        assert!(e.to_string().contains("/nonexistent/dir/map.txt"), "{e}");
-    }
-
-    #[test]
-    fn ray_distances_are_exact() {
-        let m = GridMap::parse(BOX, "box").unwrap();
-        let o = Vec2::new(2.5, 2.5);
-        // Floor spans x in [1, 4]: east wall face at x = 4.
-        let h = m.cast_ray(o, Vec2::new(1.0, 0.0)).unwrap();
-        assert_eq!(h.distance_m, 1.5);
-        assert_eq!(h.face, Face::West);
-        assert_eq!((h.cell_col, h.cell_row), (4, 2));
-        assert_eq!(h.u_m, 0.5);
-        let h = m.cast_ray(o, Vec2::new(0.0, -3.0)).unwrap();
-        assert_eq!(h.distance_m, 1.5);
-        assert_eq!(h.face, Face::North);
-        assert_eq!(h.normal, Vec2::new(0.0, 1.0));
-        // A diagonal from (1.2, 1.3) towards the north-east hits the north wall (y = 4) at x = 3.9.
-        let o2 = Vec2::new(1.2, 1.3);
-        let h = m.cast_ray(o2, Vec2::new(1.0, 1.0)).unwrap();
-        let expect = 2.7 * 2f64.sqrt();
-        assert!((h.distance_m - expect).abs() < 1e-12, "{}", h.distance_m);
-        assert!((h.point.x - 3.9).abs() < 1e-12 && h.point.y == 4.0);
-        assert_eq!(h.face, Face::South);
-        assert!((h.u_m - 0.9).abs() < 1e-12);
-        // Shallow ray: from (1.1, 1.5) at slope 0.1 hits x = 4 at y = 1.79.
-        let h = m
-            .cast_ray(Vec2::new(1.1, 1.5), Vec2::new(1.0, 0.1))
-            .unwrap();
-        assert!((h.point.y - 1.79).abs() < 1e-12);
-        assert!((h.distance_m - 2.9 * (1.01f64).sqrt()).abs() < 1e-12);
-        // Origin in a wall or degenerate direction.
-        assert!(
-            m.cast_ray(Vec2::new(0.5, 0.5), Vec2::new(1.0, 0.0))
-                .is_none()
-        );
-        assert!(m.cast_ray(o, Vec2::new(0.0, 0.0)).is_none());
-    }
-
-    #[test]
-    fn ray_into_open_edge_stops_at_grid_border() {
-        // Floor reaches the east edge of the grid: the outside is wall.
-        let m = GridMap::parse("@cell_m 0.5\n####\n#>..\n####", "t").unwrap();
-        let h = m
-            .cast_ray(Vec2::new(0.75, 0.75), Vec2::new(1.0, 0.0))
-            .unwrap();
-        assert_eq!(h.distance_m, 1.25);
-        assert_eq!(h.cell_col, 4);
-    }
-
-    #[test]
-    fn rectangle_overlap() {
-        let m = GridMap::parse(BOX, "box").unwrap();
-        assert!(!m.rect_hits_wall(&Pose::from_deg(2.5, 2.5, 30.0), 0.438, 0.311));
-        // Front edge at 3.95 < 4: free; at 4.05: hits.
-        assert!(!m.rect_hits_wall(&Pose::from_deg(3.95 - 0.219, 2.5, 0.0), 0.438, 0.311));
-        assert!(m.rect_hits_wall(&Pose::from_deg(4.05 - 0.219, 2.5, 0.0), 0.438, 0.311));
-        // Rotated 45 degrees near a corner: the diagonal half-extent is (0.438+0.311)/2/sqrt(2).
-        let r = (0.438 + 0.311) / 2.0 / 2f64.sqrt();
-        assert!(!m.rect_hits_wall(&Pose::from_deg(4.0 - r - 0.01, 2.5, 45.0), 0.438, 0.311));
-        assert!(m.rect_hits_wall(&Pose::from_deg(4.0 - r + 0.01, 2.5, 45.0), 0.438, 0.311));
-    }
-
-    #[test]
-    fn pose_from_str() {
-        let p: Pose = "1.5, 2,90".parse().unwrap();
-        assert_eq!((p.x_m, p.y_m), (1.5, 2.0));
-        assert!((p.heading_deg() - 90.0).abs() < 1e-12);
-        assert!("1,2".parse::<Pose>().is_err());
-        let e = "1,x,3".parse::<Pose>().unwrap_err();
-        assert!(e.to_string().contains("y_m"), "{e}");
-    }
-}
+mod tests;

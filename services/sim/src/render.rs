@@ -366,8 +366,14 @@ impl Renderer {
             let fp_s = (ds_da.abs() / f).min(100.0) as f32;
             let fp_z = (depth / f) as f32;
             let run = self.decor.run_of(hit.cell_col, hit.cell_row, hit.face);
-            cols.tex
-                .push(WallColumn::new(tex, s as f32, fp_s, fp_z, run));
+            cols.tex.push(WallColumn::new(
+                tex,
+                s as f32,
+                fp_s,
+                fp_z,
+                run,
+                self.map.wall_contrast() as f32,
+            ));
             cols.depth_m.push(depth as f32);
             cols.gt.push(quantise_disparity(
                 (rig.focal_px * rig.baseline_m / depth) as f32,
@@ -566,6 +572,73 @@ mod tests {
                 assert!(max - min > 100, "contrast {min}..{max}");
             }
         }
+    }
+
+    /// Grey levels of the front wall around the horizon from `pose` (all one wall run).
+    fn front_wall_block(map: &GridMap, pose: &Pose) -> Vec<f64> {
+        let rig = StereoRig::qvga();
+        let n = rig.pixels();
+        let (mut l, mut r) = (vec![0u8; n], vec![0u8; n]);
+        Renderer::new(map, rig)
+            .render_pair(pose, pose, &mut l, &mut r, None)
+            .unwrap();
+        let (w, h) = (rig.width, rig.height);
+        // Rows above the wall's foot 6 m away (12 rows below the horizon).
+        (h / 2 - 20..h / 2 + 8)
+            .flat_map(|y| (w / 2 - 40..w / 2 + 40).map(move |x| y * w + x))
+            .map(|i| f64::from(l[i]))
+            .collect()
+    }
+
+    fn spread(v: &[f64]) -> f64 {
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+    }
+
+    #[test]
+    fn wall_contrast_scales_the_wall_texture() {
+        let pose = Pose::from_deg(1.25, 2.25, 0.0);
+        let with = |c: Option<f64>| {
+            let text = match c {
+                Some(c) => format!("@wall_contrast {c}\n{ROOM}"),
+                None => ROOM.to_string(),
+            };
+            front_wall_block(&GridMap::parse(&text, "room").unwrap(), &pose)
+        };
+        let full = with(None);
+        assert_eq!(full, with(Some(1.0)), "1 is today's texture");
+        let s_full = spread(&full);
+        assert!(s_full > 5.0, "{s_full}");
+        let plain = with(Some(0.0));
+        assert!(
+            plain.iter().all(|&v| v == plain[0]),
+            "plain paint is one grey"
+        );
+        let half = spread(&with(Some(0.5)));
+        assert!((half / s_full - 0.5).abs() < 0.05, "{half} vs {s_full}");
+        // The override does the same as the directive.
+        let mut m = room();
+        m.set_wall_contrast(0.0);
+        assert_eq!(front_wall_block(&m, &pose), plain);
+        // Different walls get different flat paint; floor and ceiling keep their texture.
+        let rig = StereoRig::qvga();
+        let n = rig.pixels();
+        let (mut l, mut r) = (vec![0u8; n], vec![0u8; n]);
+        let corner = Pose::from_deg(6.0, 1.5, -45.0);
+        Renderer::new(&m, rig)
+            .render_pair(&corner, &corner, &mut l, &mut r, None)
+            .unwrap();
+        let (w, h) = (rig.width, rig.height);
+        let row: Vec<u8> = l[(h / 2) * w..(h / 2 + 1) * w].to_vec();
+        let mut greys: Vec<u8> = row.clone();
+        greys.dedup();
+        let (lo, hi) = (greys.iter().min(), greys.iter().max());
+        assert!(
+            greys.len() == 2 && hi.zip(lo).is_some_and(|(h, l)| h - l >= 8),
+            "two flat walls meet at the corner: {greys:?}"
+        );
+        let floor_row = &l[(h - 1) * w..h * w];
+        assert!(spread(&floor_row.iter().map(|&v| f64::from(v)).collect::<Vec<_>>()) > 2.0);
     }
 
     #[test]

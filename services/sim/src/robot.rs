@@ -13,8 +13,15 @@
 //! skid-steer slip factor): the reference's left-turn pulses (right 840, left 920) then turn at
 //! about 170 deg/s and its right-turn pulses (right 510, left 600) at about 280 deg/s; with the
 //! reference's ramped turn commands that gives turns of up to 90 degrees in one 1.9 s cycle.
+//!
+//! With [`Robot::with_motion_noise`] the wheels do not quite do what the pulses command
+//! (`[sim.motion]`, [`crate::noise`]): each motor's target is the commanded speed times a
+//! per-wheel factor (a constant scale error and a slowly varying error), and turns in place
+//! lose a fraction of their rate to skidding. Without it (the default) the robot moves exactly
+//! as commanded.
 
 use crate::map::{GridMap, Pose};
+use crate::noise::WheelNoise;
 
 /// Robot and motor parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -106,10 +113,12 @@ pub struct Robot {
     collisions: u64,
     odometer_m: f64,
     last_contact_odometer_m: Option<f64>,
+    /// Wheel slip and speed errors (`None`: the wheels do exactly what is commanded).
+    noise: Option<WheelNoise>,
 }
 
 impl Robot {
-    /// A robot at rest at `pose`.
+    /// A robot at rest at `pose` whose wheels do exactly what the pulses command.
     pub fn new(params: RobotParams, pose: Pose) -> Self {
         Robot {
             params,
@@ -120,7 +129,19 @@ impl Robot {
             collisions: 0,
             odometer_m: 0.0,
             last_contact_odometer_m: None,
+            noise: None,
         }
+    }
+
+    /// This robot with wheel slip and speed errors (`None`: none).
+    pub fn with_motion_noise(mut self, noise: Option<WheelNoise>) -> Self {
+        self.noise = noise;
+        self
+    }
+
+    /// The wheel slip and speed errors, if any.
+    pub fn motion_noise(&self) -> Option<&WheelNoise> {
+        self.noise.as_ref()
     }
 
     /// Parameters.
@@ -196,10 +217,14 @@ impl Robot {
             1.0
         };
         for _ in 0..n {
-            self.v_left_mps += (vl_cmd - self.v_left_mps) * alpha;
-            self.v_right_mps += (vr_cmd - self.v_right_mps) * alpha;
+            let (fl, fr) = self.noise.as_mut().map_or((1.0, 1.0), |w| w.step(h));
+            self.v_left_mps += (vl_cmd * fl - self.v_left_mps) * alpha;
+            self.v_right_mps += (vr_cmd * fr - self.v_right_mps) * alpha;
             let v = 0.5 * (self.v_left_mps + self.v_right_mps);
-            let omega = (self.v_right_mps - self.v_left_mps) / p.track_eff_m;
+            let mut omega = (self.v_right_mps - self.v_left_mps) / p.track_eff_m;
+            if let Some(w) = &self.noise {
+                omega *= w.turn_kept(self.v_left_mps, self.v_right_mps);
+            }
             if v == 0.0 && omega == 0.0 {
                 self.in_collision = false;
                 continue;
@@ -279,6 +304,7 @@ pub fn wrap_angle(a: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::noise::SimMotionNoise;
 
     fn open_map() -> GridMap {
         // 20 m x 20 m empty room (cells of 1 m), start in the middle facing east.
@@ -356,6 +382,73 @@ mod tests {
             "{}",
             rate.to_degrees()
         );
+    }
+
+    fn noisy(noise: SimMotionNoise, seed: u64, start: Pose) -> Robot {
+        Robot::new(RobotParams::default(), start).with_motion_noise(WheelNoise::new(noise, seed))
+    }
+
+    #[test]
+    fn motion_noise_off_moves_exactly_as_commanded() {
+        let map = open_map();
+        let start = map.start_pose();
+        let mut a = Robot::new(RobotParams::default(), start);
+        let mut b = noisy(SimMotionNoise::off(), 5, start);
+        assert!(b.motion_noise().is_none());
+        for (l, r) in [(720.0, 800.0), (810.0, 808.0), (700.0, 790.0)] {
+            a.step(1.3, Some(l), Some(r), &map);
+            b.step(1.3, Some(l), Some(r), &map);
+        }
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn turn_slip_loses_the_configured_share_of_a_turn_in_place() {
+        let map = open_map();
+        let start = map.start_pose();
+        let slip = SimMotionNoise {
+            turn_slip: 0.05,
+            ..SimMotionNoise::off()
+        };
+        let turn = |mut r: Robot| {
+            // The shipped left-turn pulses (each wheel 50 units from neutral), 1 s.
+            r.step(1.0, Some(810.0), Some(808.0), &map);
+            let p = r.pose();
+            (wrap_angle(p.heading_rad - start.heading_rad), p)
+        };
+        let (exact, p0) = turn(Robot::new(RobotParams::default(), start));
+        let (slipped, p1) = turn(noisy(slip, 1, start));
+        assert!(exact > 1.0, "{exact}");
+        assert!((slipped / exact - 0.95).abs() < 0.01, "{slipped} / {exact}");
+        assert!((p0.x_m - p1.x_m).abs() < 1e-3 && (p0.y_m - p1.y_m).abs() < 1e-3);
+        // Straight driving is unchanged by turn slip alone.
+        let mut a = Robot::new(RobotParams::default(), start);
+        let mut b = noisy(slip, 1, start);
+        a.step(3.0, Some(720.0), Some(800.0), &map);
+        b.step(3.0, Some(720.0), Some(800.0), &map);
+        assert_eq!(a.pose(), b.pose());
+    }
+
+    #[test]
+    fn realistic_noise_makes_the_robot_drift_from_the_commanded_path() {
+        let map = open_map();
+        let start = map.start_pose();
+        let mut exact = Robot::new(RobotParams::default(), start);
+        let mut drifts = Vec::new();
+        for seed in 0..8 {
+            let mut r = noisy(SimMotionNoise::realistic(), seed, start);
+            r.step(20.0, Some(720.0), Some(800.0), &map);
+            drifts.push((r.pose().y_m - start.y_m).abs());
+            // Deterministic per seed.
+            let mut again = noisy(SimMotionNoise::realistic(), seed, start);
+            again.step(20.0, Some(720.0), Some(800.0), &map);
+            assert_eq!(r.pose(), again.pose());
+        }
+        exact.step(20.0, Some(720.0), Some(800.0), &map);
+        assert!((exact.pose().y_m - start.y_m).abs() < 1e-9);
+        // 5.5 m at 2 % scale errors: the heading wanders by degrees, the robot by decimetres.
+        let mean = drifts.iter().sum::<f64>() / drifts.len() as f64;
+        assert!(mean > 0.05 && mean < 3.0, "{drifts:?}");
     }
 
     #[test]

@@ -157,6 +157,10 @@ pub(crate) struct WallRun {
     /// Per-line seed (decorrelates texture of different walls).
     pub(crate) seed: u32,
     pub(crate) decor: Vec<Decor>,
+    /// This run's flat paint at zero wall contrast, grey levels from [`WALL_PAINT_MEAN`]:
+    /// walls facing east or west a little lighter, walls facing north or south a little
+    /// darker (as a plain hallway's walls are lit differently), each run by its own amount.
+    pub(crate) paint_offset: f32,
 }
 
 /// Decorations of a whole map, looked up by the wall cell and face a ray hit.
@@ -247,9 +251,12 @@ impl SceneDecor {
                     );
                     let s_start = start as f32 * cs;
                     let s_end = end as f32 * cs;
+                    let shade =
+                        PLAIN_PAINT_MIN + PLAIN_PAINT_SPREAD * unit(hash32(run_seed ^ 0x5a17_c0de));
                     runs.push(WallRun {
                         seed: run_seed,
                         decor: layout_decor(run_seed, s_start, s_end),
+                        paint_offset: if along_x { -shade } else { shade },
                     });
                 }
             }
@@ -584,7 +591,7 @@ impl Textures {
             .map(|i| {
                 let (x, y) = ((i % ww) as f32 + 0.5, (i / ww) as f32 + 0.5);
                 let (s, z) = (x * WALL_TEXEL_M, y * WALL_TEXEL_M);
-                172.0
+                WALL_PAINT_MEAN
                     + 16.0 * periodic_vnoise(s / 0.384, z / 0.384, 16, 8, 11)
                     + 22.0 * periodic_vnoise(s / 0.048, z / 0.048, 128, 64, 12)
                     + 28.0 * periodic_vnoise(s / 0.012, z / 0.012, 512, 256, 13)
@@ -670,18 +677,41 @@ pub(crate) struct WallColumn<'a> {
     w_detail: f32,
     /// Detail layer's x part.
     xp_detail: XPart,
+    /// Contrast of the texture around its mean (1: the texture as it is).
+    contrast: f32,
+    /// The flat grey the texture's deviations are scaled towards (the run's paint).
+    albedo: f32,
 }
+
+/// Mean grey level of the wall paint texture (the constant of its formula in
+/// `Textures::build`).
+pub(crate) const WALL_PAINT_MEAN: f32 = 172.0;
+/// Least departure of a wall run's flat paint from [`WALL_PAINT_MEAN`] at zero contrast, grey
+/// levels (so that two walls meeting at a corner always differ by twice this).
+pub(crate) const PLAIN_PAINT_MIN: f32 = 4.0;
+/// Spread of the runs' departures beyond [`PLAIN_PAINT_MIN`], grey levels.
+pub(crate) const PLAIN_PAINT_SPREAD: f32 = 10.0;
 
 impl<'a> WallColumn<'a> {
     /// Prepares the column constants for wall coordinate `s`, pixel footprints along the wall
-    /// and vertically, and the wall run hit.
+    /// and vertically, the wall run hit, and the wall contrast (`@wall_contrast`, 0..=1):
+    /// the texture's deviations from its mean are scaled by it, and the mean moves towards
+    /// the run's own flat paint as it falls, reaching it at 0.
     pub(crate) fn new(
         tex: &'a Textures,
         s: f32,
         fp_s: f32,
         fp_z: f32,
         run: Option<&'a WallRun>,
+        contrast: f32,
     ) -> Self {
+        let contrast = if contrast.is_nan() {
+            1.0
+        } else {
+            contrast.clamp(0.0, 1.0)
+        };
+        let paint_offset = run.map_or(0.0, |r| r.paint_offset);
+        let albedo = WALL_PAINT_MEAN + (1.0 - contrast) * paint_offset;
         let fp = fp_s.max(fp_z);
         let (s_off, z_off) = run.map_or((17.0, 5.0), |r| {
             ((r.seed & 0x3ff) as f32, ((r.seed >> 10) & 0x7f) as f32)
@@ -743,12 +773,26 @@ impl<'a> WallColumn<'a> {
             // Only where one texel spans more than ~4 pixels (closer than ~1 m at f = 640 px).
             w_detail: ((DETAIL_START_FP_M - fp) / (0.5 * DETAIL_START_FP_M)).clamp(0.0, 1.0),
             xp_detail: lv0.xpart(u * DETAIL_SCALE + 301.0),
+            contrast,
+            albedo,
         }
     }
 
     /// Grey level of the wall at height `z` (metres) in this column.
     #[inline(always)]
     pub(crate) fn shade(&self, st: &mut ShadeState, noise: &NoiseTable, z: f32) -> f32 {
+        if self.contrast >= 1.0 {
+            return self.shade_textured(st, noise, z);
+        }
+        if self.contrast <= 0.0 {
+            return self.albedo;
+        }
+        self.albedo + self.contrast * (self.shade_textured(st, noise, z) - WALL_PAINT_MEAN)
+    }
+
+    /// The full-contrast texture (paint, baseboard, doors, posters).
+    #[inline(always)]
+    fn shade_textured(&self, st: &mut ShadeState, noise: &NoiseTable, z: f32) -> f32 {
         let v_base = z * (1.0 / WALL_TEXEL_M) + self.z_off;
         let a = self
             .lv0
@@ -766,7 +810,7 @@ impl<'a> WallColumn<'a> {
             let d =
                 self.lv0
                     .sample_x_cached(self.xp_detail, v_base * DETAIL_SCALE + 177.0, &mut st.cd);
-            paint + self.w_detail * (d - 172.0)
+            paint + self.w_detail * (d - WALL_PAINT_MEAN)
         } else {
             paint
         };

@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use crate::defects::{DefectsError, SimRng, WebcamDefects, sim_rng};
 use crate::map::{GridMap, Pose};
+use crate::noise::{SimMotionNoise, WheelNoise};
 use crate::psc::PscEmulator;
 use crate::render::{RenderError, Renderer, StereoRig};
 use crate::robot::{Robot, RobotParams, wrap_angle};
@@ -30,7 +31,9 @@ pub struct SimConfig {
     pub defects: WebcamDefects,
     /// Robot and motor parameters (PSC channels included).
     pub robot: RobotParams,
-    /// Seed of the image noise.
+    /// Wheel slip and speed errors of the robot (`[sim.motion]`; off by default).
+    pub motion: SimMotionNoise,
+    /// Seed of the image noise and of the motion noise (separate streams).
     pub seed: u64,
 }
 
@@ -40,6 +43,7 @@ impl Default for SimConfig {
             rig: StereoRig::vga(),
             defects: WebcamDefects::none(),
             robot: RobotParams::default(),
+            motion: SimMotionNoise::off(),
             seed: 1,
         }
     }
@@ -48,7 +52,8 @@ impl Default for SimConfig {
 impl SimConfig {
     /// The simulator settings of an hvs config, rendering `width x height` images: camera
     /// focal length, baseline and mount, webcam defects, the robot's body (`[robot]`, the
-    /// description the navigator also uses), PSC channels and seed.
+    /// description the navigator also uses), PSC channels, the motion noise (`[sim.motion]`)
+    /// and seed.
     pub fn from_hvs(config: &hvs_runtime::config::HvsConfig, width: usize, height: usize) -> Self {
         let mut rig = StereoRig::new(width, height, config.camera.focal_px(width));
         rig.baseline_m = config.camera.baseline_m;
@@ -73,6 +78,7 @@ impl SimConfig {
                 right_channel: config.actuator.right_channel,
                 ..RobotParams::default()
             },
+            motion: config.sim.motion,
             seed: config.sim.seed,
         }
     }
@@ -137,7 +143,8 @@ impl SimWorld {
         history.push_back((0.0, start));
         SimWorld {
             renderer: Renderer::new(&map, config.rig),
-            robot: Robot::new(config.robot, start),
+            robot: Robot::new(config.robot, start)
+                .with_motion_noise(WheelNoise::new(config.motion, config.seed)),
             psc: Arc::new(Mutex::new(PscEmulator::new())),
             defects: config.defects,
             rng: sim_rng(config.seed),
@@ -371,6 +378,42 @@ mod tests {
         let x = w.pose().x_m;
         w.advance_to(5.0);
         assert!((w.pose().x_m - x).abs() < 1e-4);
+    }
+
+    #[test]
+    fn motion_noise_comes_from_the_config_and_its_seed() {
+        let drive = |motion: SimMotionNoise, seed: u64| {
+            let mut w = SimWorld::new(
+                hallway(),
+                SimConfig {
+                    motion,
+                    seed,
+                    ..config()
+                },
+            );
+            let psc = w.psc();
+            lock_psc(&psc).receive(&encode_position(1, 0, 720), 0.0);
+            lock_psc(&psc).receive(&encode_position(5, 0, 800), 0.0);
+            w.advance_to(10.0);
+            w.pose()
+        };
+        let exact = drive(SimMotionNoise::off(), 1);
+        assert_eq!(
+            exact,
+            drive(SimMotionNoise::off(), 2),
+            "off: the seed does not matter"
+        );
+        let a = drive(SimMotionNoise::realistic(), 1);
+        assert_eq!(a, drive(SimMotionNoise::realistic(), 1));
+        assert_ne!(a, drive(SimMotionNoise::realistic(), 2));
+        assert_ne!(a, exact);
+        let map = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/maps/maze.txt");
+        let text = format!("[sim]\nseed = 4\nmap = \"{map}\"\n[sim.motion]\nturn_slip = 0.05\n");
+        let hvs = hvs_runtime::config::HvsConfig::parse(&text, std::path::Path::new("/x/t.toml"))
+            .expect("valid");
+        let c = SimConfig::from_hvs(&hvs, 320, 240);
+        assert_eq!(c.seed, 4);
+        assert_eq!(c.motion.turn_slip, 0.05);
     }
 
     #[test]

@@ -249,6 +249,8 @@ pub struct Navigator {
     turn_shifts: u32,
     /// The robot's footprint.
     footprint: Footprint,
+    /// The exploring navigator (`policy = "explore"`).
+    explorer: Option<Box<crate::explore::Explorer>>,
 }
 
 impl Navigator {
@@ -284,12 +286,50 @@ impl Navigator {
             now_ns: 0,
             next_correction_m: 0.0,
             turn_shifts: 0,
+            explorer: (cfg.policy == DecisionPolicy::Explore).then(|| {
+                Box::new(crate::explore::Explorer::new(
+                    NavConfig::default(),
+                    robot,
+                    pulses,
+                    0.2,
+                ))
+            }),
         }
+    }
+
+    /// Sets the exploring navigator's settings (`[nav]`; used by `policy = "explore"`).
+    pub fn with_nav(mut self, nav: &NavConfig, robot: &RobotConfig, pulses: &PulseTable) -> Self {
+        if self.explorer.is_some() {
+            self.explorer = Some(Box::new(crate::explore::Explorer::new(
+                *nav,
+                robot,
+                pulses,
+                self.camera_forward_m,
+            )));
+        }
+        self
+    }
+
+    /// Tells the exploring navigator the 320x240 matcher's largest disparity (the scan's
+    /// leftmost columns within it of the image edge are not trusted).
+    pub fn with_matcher_reach(mut self, max_disp: u32, width_px: u32) -> Self {
+        if let Some(e) = self.explorer.as_mut() {
+            e.set_matcher_reach(max_disp, width_px);
+        }
+        self
+    }
+
+    /// The exploring navigator, when the policy is `explore`.
+    pub fn explorer(&self) -> Option<&crate::explore::Explorer> {
+        self.explorer.as_deref()
     }
 
     /// Sets where the camera sits: `forward_m` ahead of the turning centre (default 0.2 m).
     pub fn with_camera_forward_m(mut self, forward_m: f64) -> Self {
         self.camera_forward_m = forward_m;
+        if let Some(e) = self.explorer.as_mut() {
+            e.set_camera_forward_m(forward_m);
+        }
         self
     }
 
@@ -304,6 +344,21 @@ impl Navigator {
     pub fn describe(&self) -> String {
         let pose = self.odometry.pose();
         let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+        if let Some(e) = &self.explorer {
+            let s = e.status();
+            return format!(
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {}{}{}",
+                e.goal_m()
+                    .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
+                s.plans,
+                s.frontiers,
+                s.blacklisted,
+                s.recoveries,
+                s.scan_fixes,
+                if e.recovering() { " recovering" } else { "" },
+                if s.done { " done" } else { "" },
+            );
+        }
         format!(
             "{:?} open L {} R {} seen {}{} wall L {} R {}",
             self.maneuver,
@@ -352,7 +407,7 @@ impl Navigator {
         // (measured: a 19 degree wrong fix while standing at a dead end's wall).
         let sides = SideRanges::from_windows(windows, window_count);
         let front_seen = sides.middle_m.is_some();
-        if self.cfg.local_map
+        if (self.cfg.local_map || self.explorer.is_some())
             && self.cfg.heading_fix_gain > 0.0
             && self.cfg.snap_turn_deg == 90.0
             && self.odometry.turn_rate_rad_s().abs() < HEADING_FIX_MAX_TURN_RAD_S
@@ -368,6 +423,12 @@ impl Navigator {
                 self.odometry
                     .correct_heading(self.cfg.heading_fix_gain * error);
             }
+        }
+        if let Some(e) = self.explorer.as_mut()
+            && let Some(fix) = e.correction(&self.odometry.pose(), scan)
+        {
+            self.odometry.correct_position(fix.dx_m, fix.dy_m);
+            self.odometry.correct_heading(fix.dheading_rad);
         }
         let pose = self.odometry.pose();
         if self.cfg.local_map && scan.valid_bins() > 0 {
@@ -410,6 +471,32 @@ impl Navigator {
                     intersection: classify(walls),
                     command,
                     turn_angle_deg,
+                    ramp,
+                    pose,
+                }
+            }
+            DecisionPolicy::Explore => {
+                let walls = crisp_walls(&sides, &lo);
+                let intersection = classify(walls);
+                let input = crate::explore::ExploreInput {
+                    pose,
+                    scan,
+                    front_m: sides.middle_m,
+                    turn_rate_rad_s: self.odometry.turn_rate_rad_s(),
+                    distance_m: self.odometry.distance_m(),
+                    intersection,
+                    now_ns,
+                };
+                let (command, ramp) = match self.explorer.as_mut() {
+                    Some(e) => e.step(input),
+                    None => (MotionCommand::Stop, 0),
+                };
+                self.current = command;
+                NavDecision {
+                    memberships: raw,
+                    intersection,
+                    command,
+                    turn_angle_deg: 0.0,
                     ramp,
                     pose,
                 }

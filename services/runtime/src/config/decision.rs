@@ -30,6 +30,10 @@ pub enum DecisionPolicy {
     /// Free ahead unless `threshold_rate_pct` of the middle window is nearer than the front
     /// threshold; otherwise toward the farther side.
     ThresholdEstimation,
+    /// Frontier exploration on a log-odds occupancy grid with a planner, a path follower and
+    /// recovery behaviours (`[nav]`); the wall memberships and intersection types are still
+    /// computed, as perception.
+    Explore,
 }
 
 /// Walls, intersections and navigation.

@@ -15,6 +15,7 @@ mod camera;
 mod capture;
 mod decision;
 mod fusion;
+mod nav;
 mod robot;
 mod sim;
 mod stages;
@@ -26,6 +27,7 @@ pub use camera::*;
 pub use capture::*;
 pub use decision::*;
 pub use fusion::*;
+pub use nav::*;
 pub use robot::*;
 pub use sim::*;
 pub use stages::*;
@@ -115,6 +117,9 @@ pub struct HvsConfig {
     /// Walls, intersections and navigation.
     #[serde(default)]
     pub decision: DecisionConfig,
+    /// The exploring navigator (`decision.policy = "explore"`).
+    #[serde(default)]
+    pub nav: NavConfig,
     /// The servo-controller link.
     #[serde(default)]
     pub actuator: ActuatorConfig,
@@ -183,6 +188,7 @@ impl HvsConfig {
             ("capture", self.capture.validate(base)),
             ("fusion", self.fusion.validate()),
             ("decision", self.decision.validate()),
+            ("nav", self.nav.validate()),
             ("actuator", self.actuator.validate()),
             ("sim", self.sim.validate()),
             ("robot", self.robot.validate()),

@@ -197,3 +197,16 @@ fn a_config_whose_stages_wait_on_nobody_is_refused_naming_the_keys() {
     parse("[stages.decision]\nenabled = false\n[stages.actuator]\nenabled = false\n")
         .expect("no decisions, no actuator");
 }
+
+#[test]
+fn the_nav_section_parses_and_a_bad_value_is_named_with_its_line() {
+    let c = parse("[decision]\npolicy = \"explore\"\n[nav.grid]\ncell_m = 0.05\n")
+        .expect("a valid [nav]");
+    assert_eq!(c.decision.policy, DecisionPolicy::Explore);
+    assert!((c.nav.grid.cell_m - 0.05).abs() < 1e-12);
+    let err = parse("[nav.frontier]\nreplan_s = 0\n")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("nav.frontier.replan_s"), "{err}");
+    assert!(err.contains("line 2"), "{err}");
+}

@@ -1,0 +1,438 @@
+//! The local controller for the skid-steer base: it follows the planner's path through the
+//! pulse table's motions (ahead, turn left or right in place, back up, stop). The point
+//! followed lies `lookahead_m` along the path; a heading error beyond `turn_above_deg` turns
+//! the robot in place until it is within `aligned_deg` (stopping early by the turn rate times
+//! the command latency), otherwise it drives ahead. Every motion is checked against the
+//! occupancy grid with the robot's footprint first: ahead, the swept rectangle; turning, the
+//! circle its corners sweep.
+
+use hvs_runtime::config::{ControllerConfig, PulsePair, PulseTable, RobotConfig};
+use hvs_shared::messages::MotionCommand;
+
+use super::grid::{Occupancy, OccupancyGrid, to_grid_frame};
+use crate::odometry::DeadReckonedPose;
+
+/// Side margin of the swept rectangle beyond the footprint, metres.
+const SWEEP_MARGIN_M: f64 = 0.03;
+/// Largest share of the swept rectangle ahead that may be unknown for driving ahead.
+const MAX_UNKNOWN_AHEAD: f64 = 0.25;
+
+/// Wraps an angle to (-pi, pi].
+pub fn wrap_rad(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    let w = (a + PI).rem_euclid(TAU) - PI;
+    if w <= -PI { w + TAU } else { w }
+}
+
+/// Footprint checks against the grid's occupied cells.
+#[derive(Debug, Clone, Copy)]
+pub struct FootprintCheck {
+    half_width_m: f64,
+    half_length_m: f64,
+    turn_radius_m: f64,
+    /// Where the robot turns about for each turn command, metres to the left of its centre:
+    /// a skid-steer's turn pulses rarely cancel (the reference's left turn backs at 0.28 m/s
+    /// while it turns), so "in place" is a small circle.
+    pivot_left_m: (f64, f64),
+}
+
+/// Body speed and turn rate for a pulse pair, from the wheel model the dead reckoning uses.
+fn body_motion(robot: &RobotConfig, pulses: &PulseTable, pair: PulsePair) -> (f64, f64) {
+    let wheel = |pw: u16, neutral: u16, forward: u16| {
+        let span = f64::from(forward) - f64::from(neutral);
+        if span.abs() < 1e-9 {
+            0.0
+        } else {
+            (f64::from(pw) - f64::from(neutral)) / span * robot.forward_speed_mps
+        }
+    };
+    let vl = wheel(pair.left, pulses.neutral.left, pulses.forward.left);
+    let vr = wheel(pair.right, pulses.neutral.right, pulses.forward.right);
+    (0.5 * (vl + vr), (vr - vl) / robot.track_m)
+}
+
+impl FootprintCheck {
+    /// The checks for a robot body and its pulse table.
+    pub fn of(robot: &RobotConfig, pulses: &PulseTable) -> Self {
+        let pivot = |pair| {
+            let (v, w) = body_motion(robot, pulses, pair);
+            if w.abs() < 1e-6 { 0.0 } else { v / w }
+        };
+        Self {
+            half_width_m: 0.5 * robot.width_m,
+            half_length_m: 0.5 * robot.length_m,
+            turn_radius_m: robot.half_diagonal_m(),
+            pivot_left_m: (pivot(pulses.left), pivot(pulses.right)),
+        }
+    }
+
+    /// Half the footprint's width, metres.
+    pub fn half_width_m(&self) -> f64 {
+        self.half_width_m
+    }
+
+    /// Counts the samples of the robot-frame rectangle `ahead` x `left` (metres) by state:
+    /// (occupied, unknown, all).
+    fn rect_count(
+        &self,
+        grid: &OccupancyGrid,
+        pose: &DeadReckonedPose,
+        ahead: (f64, f64),
+        left: (f64, f64),
+    ) -> (usize, usize, usize) {
+        let step = 0.5 * grid.cell_m();
+        let (mut occupied, mut unknown, mut all) = (0, 0, 0);
+        let mut a = ahead.0;
+        while a <= ahead.1 + 1e-9 {
+            let mut l = left.0;
+            while l <= left.1 + 1e-9 {
+                let (x, y) = to_grid_frame(pose, (a, l));
+                match grid.state_at(x, y) {
+                    Occupancy::Occupied => occupied += 1,
+                    Occupancy::Unknown => unknown += 1,
+                    Occupancy::Free => {}
+                }
+                all += 1;
+                l += step;
+            }
+            a += step;
+        }
+        (occupied, unknown, all)
+    }
+
+    /// Whether driving `ahead_m` forward sweeps no occupied cell and mostly cells seen free:
+    /// the camera is blind closer than the matcher's shortest range, so a wall right ahead
+    /// shows as unknown, not as occupied.
+    pub fn ahead_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, ahead_m: f64) -> bool {
+        let w = self.half_width_m + SWEEP_MARGIN_M;
+        let (occupied, unknown, all) = self.rect_count(
+            grid,
+            pose,
+            (self.half_length_m, self.half_length_m + ahead_m),
+            (-w, w),
+        );
+        occupied == 0 && (unknown as f64) <= MAX_UNKNOWN_AHEAD * all as f64
+    }
+
+    /// Whether backing up `back_m` sweeps no occupied cell (the camera never sees behind;
+    /// the robot came that way).
+    pub fn behind_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, back_m: f64) -> bool {
+        let w = self.half_width_m + SWEEP_MARGIN_M;
+        self.rect_count(
+            grid,
+            pose,
+            (-self.half_length_m - back_m, -self.half_length_m),
+            (-w, w),
+        )
+        .0 == 0
+    }
+
+    /// Whether the disc the footprint sweeps turning (`left` or right) holds an occupied
+    /// cell, and if so whether the nearest one is ahead of the turning centre.
+    pub fn turn_blocked(
+        &self,
+        grid: &OccupancyGrid,
+        pose: &DeadReckonedPose,
+        left: bool,
+    ) -> Option<bool> {
+        let pivot = if left {
+            self.pivot_left_m.0
+        } else {
+            self.pivot_left_m.1
+        };
+        let r = self.turn_radius_m + pivot.abs() + 0.02;
+        let step = 0.5 * grid.cell_m();
+        let n = (r / step).ceil() as i64;
+        let mut nearest: Option<(f64, f64)> = None;
+        for i in -n..=n {
+            for j in -n..=n {
+                let p = (i as f64 * step, pivot + j as f64 * step);
+                let d = (i as f64 * step).hypot(j as f64 * step);
+                if d > r {
+                    continue;
+                }
+                let (x, y) = to_grid_frame(pose, p);
+                if grid.state_at(x, y) == Occupancy::Occupied
+                    && nearest.is_none_or(|(nd, _)| d < nd)
+                {
+                    nearest = Some((d, p.0));
+                }
+            }
+        }
+        nearest.map(|(_, ahead)| ahead > 0.0)
+    }
+}
+
+/// What the controller is doing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    /// Driving along the path (or standing, when told to).
+    Follow,
+    /// Turning in place toward the path (`left`: counter-clockwise).
+    Turn { left: bool },
+}
+
+/// What the controller decided.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Control {
+    /// The motion to send.
+    pub command: MotionCommand,
+    /// The way along the path was blocked (the caller should plan again).
+    pub blocked: bool,
+    /// Heading error to the followed point, radians.
+    pub heading_error_rad: f64,
+}
+
+/// The path follower.
+#[derive(Debug, Clone)]
+pub struct Controller {
+    cfg: ControllerConfig,
+    footprint: FootprintCheck,
+    mode: Mode,
+}
+
+/// What the controller sees this frame.
+#[derive(Debug, Clone, Copy)]
+pub struct ControlInput<'a> {
+    /// The pose on the map.
+    pub pose: DeadReckonedPose,
+    /// The path, grid frame, metres (from the robot to the goal).
+    pub path: &'a [(f64, f64)],
+    /// The middle window's range, metres (None: nothing seen).
+    pub front_m: Option<f64>,
+    /// The current turn rate, rad/s.
+    pub turn_rate_rad_s: f64,
+}
+
+impl Controller {
+    /// A controller for a robot body and its pulse table.
+    pub fn new(cfg: ControllerConfig, robot: &RobotConfig, pulses: &PulseTable) -> Self {
+        Self {
+            cfg,
+            footprint: FootprintCheck::of(robot, pulses),
+            mode: Mode::Follow,
+        }
+    }
+
+    /// The footprint checks.
+    pub fn footprint(&self) -> &FootprintCheck {
+        &self.footprint
+    }
+
+    /// Forgets a turn in progress.
+    pub fn reset(&mut self) {
+        self.mode = Mode::Follow;
+    }
+
+    /// The point `lookahead_m` along the path from its point nearest the robot.
+    fn lookahead(&self, pose: &DeadReckonedPose, path: &[(f64, f64)]) -> Option<(f64, f64)> {
+        let nearest = path
+            .iter()
+            .enumerate()
+            .min_by(|a, b| {
+                let da = (a.1.0 - pose.x_m).hypot(a.1.1 - pose.y_m);
+                let db = (b.1.0 - pose.x_m).hypot(b.1.1 - pose.y_m);
+                da.total_cmp(&db)
+            })
+            .map(|(i, _)| i)?;
+        let mut left = self.cfg.lookahead_m;
+        let mut prev = (pose.x_m, pose.y_m);
+        for &p in &path[nearest..] {
+            let d = (p.0 - prev.0).hypot(p.1 - prev.1);
+            if d >= left {
+                let t = left / d;
+                return Some((prev.0 + t * (p.0 - prev.0), prev.1 + t * (p.1 - prev.1)));
+            }
+            left -= d;
+            prev = p;
+        }
+        path.last().copied()
+    }
+
+    /// One control step on the grid.
+    pub fn step(&mut self, grid: &OccupancyGrid, input: ControlInput<'_>) -> Control {
+        let pose = input.pose;
+        let Some(target) = self.lookahead(&pose, input.path) else {
+            self.mode = Mode::Follow;
+            return Control {
+                command: MotionCommand::Stop,
+                blocked: false,
+                heading_error_rad: 0.0,
+            };
+        };
+        let bearing = (target.1 - pose.y_m).atan2(target.0 - pose.x_m);
+        let error = wrap_rad(bearing - pose.heading_rad);
+        let out = |command, blocked| Control {
+            command,
+            blocked,
+            heading_error_rad: error,
+        };
+        if let Mode::Turn { left } = self.mode {
+            let lead = input.turn_rate_rad_s.abs() * self.cfg.turn_lead_s;
+            let still_to_go = if left { error } else { -error };
+            if still_to_go - lead > self.cfg.aligned_deg.to_radians() {
+                return out(turn_command(left), false);
+            }
+            self.mode = Mode::Follow;
+            if error.abs() > self.cfg.aligned_deg.to_radians() + lead {
+                // Overshot: stand for a frame and look again.
+                return out(MotionCommand::Stop, false);
+            }
+        }
+        if error.abs() > self.cfg.turn_above_deg.to_radians() {
+            let left = error > 0.0;
+            match self.footprint.turn_blocked(grid, &pose, left) {
+                None => {
+                    self.mode = Mode::Turn { left };
+                    return out(turn_command(left), false);
+                }
+                // Something in the turning circle: move away from it first.
+                Some(ahead) => {
+                    if ahead && self.footprint.behind_clear(grid, &pose, 0.1) {
+                        return out(MotionCommand::Reverse, false);
+                    }
+                    if !ahead
+                        && self.footprint.ahead_clear(grid, &pose, 0.1)
+                        && self.front_open(input.front_m)
+                    {
+                        return out(MotionCommand::Forward, false);
+                    }
+                    // Boxed in: turn anyway, the shortest way.
+                    self.mode = Mode::Turn { left };
+                    return out(turn_command(left), false);
+                }
+            }
+        }
+        if self
+            .footprint
+            .ahead_clear(grid, &pose, self.cfg.check_ahead_m)
+            && self.front_open(input.front_m)
+        {
+            out(MotionCommand::Forward, false)
+        } else {
+            out(MotionCommand::Stop, true)
+        }
+    }
+
+    fn front_open(&self, front_m: Option<f64>) -> bool {
+        front_m.is_none_or(|m| m >= self.cfg.stop_range_m)
+    }
+}
+
+fn turn_command(left: bool) -> MotionCommand {
+    if left {
+        MotionCommand::Left
+    } else {
+        MotionCommand::Right
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hvs_runtime::config::GridConfig;
+
+    /// A grid seen free for 3 m all round the origin.
+    fn open_grid() -> OccupancyGrid {
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        let mut scan = hvs_shared::messages::ObstacleScan {
+            tan_half_fov: 0.5,
+            ..Default::default()
+        };
+        scan.range_m = [5.0; hvs_shared::messages::SCAN_BINS];
+        for k in 0..16 {
+            let pose = DeadReckonedPose {
+                heading_rad: f64::from(k) * std::f64::consts::TAU / 16.0,
+                ..DeadReckonedPose::default()
+            };
+            for _ in 0..3 {
+                let pts = grid.scan_points(&pose, 0.0, &scan);
+                grid.insert(&pts);
+            }
+        }
+        grid
+    }
+
+    fn input(pose: DeadReckonedPose, path: &[(f64, f64)]) -> ControlInput<'_> {
+        ControlInput {
+            pose,
+            path,
+            front_m: None,
+            turn_rate_rad_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn drives_ahead_along_a_straight_path_and_turns_toward_a_side_one() {
+        let grid = open_grid();
+        let mut c = Controller::new(
+            ControllerConfig::default(),
+            &RobotConfig::default(),
+            &PulseTable::default(),
+        );
+        // Nothing seen ahead: no driving into it.
+        let unseen = OccupancyGrid::new(GridConfig::default());
+        let ahead = [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0)];
+        assert!(
+            c.step(&unseen, input(DeadReckonedPose::default(), &ahead))
+                .blocked
+        );
+        let got = c.step(&grid, input(DeadReckonedPose::default(), &ahead));
+        assert_eq!(got.command, MotionCommand::Forward);
+        let left = [(0.0, 0.0), (0.0, 1.0)];
+        let got = c.step(&grid, input(DeadReckonedPose::default(), &left));
+        assert_eq!(got.command, MotionCommand::Left);
+        // Still turning at 45 degrees, aligned at 88.
+        let half = DeadReckonedPose {
+            heading_rad: 45f64.to_radians(),
+            ..DeadReckonedPose::default()
+        };
+        assert_eq!(
+            c.step(&grid, input(half, &left)).command,
+            MotionCommand::Left
+        );
+        let done = DeadReckonedPose {
+            heading_rad: 88f64.to_radians(),
+            ..DeadReckonedPose::default()
+        };
+        assert_eq!(
+            c.step(&grid, input(done, &left)).command,
+            MotionCommand::Forward
+        );
+        let right = [(0.0, 0.0), (0.0, -1.0)];
+        let mut c = Controller::new(
+            ControllerConfig::default(),
+            &RobotConfig::default(),
+            &PulseTable::default(),
+        );
+        assert_eq!(
+            c.step(&grid, input(DeadReckonedPose::default(), &right))
+                .command,
+            MotionCommand::Right
+        );
+    }
+
+    #[test]
+    fn a_near_front_range_blocks_driving_ahead() {
+        let grid = open_grid();
+        let mut c = Controller::new(
+            ControllerConfig::default(),
+            &RobotConfig::default(),
+            &PulseTable::default(),
+        );
+        let ahead = [(0.0, 0.0), (2.0, 0.0)];
+        let mut i = input(DeadReckonedPose::default(), &ahead);
+        i.front_m = Some(0.2);
+        let got = c.step(&grid, i);
+        assert_eq!(got.command, MotionCommand::Stop);
+        assert!(got.blocked);
+    }
+
+    #[test]
+    fn wrap_keeps_angles_in_the_half_open_interval() {
+        use std::f64::consts::PI;
+        assert!((wrap_rad(3.0 * PI) - PI).abs() < 1e-9);
+        assert!((wrap_rad(-PI) - PI).abs() < 1e-9);
+        assert!((wrap_rad(0.5) - 0.5).abs() < 1e-12);
+    }
+}

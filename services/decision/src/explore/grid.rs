@@ -1,0 +1,357 @@
+//! The world model: a log-odds occupancy grid in the dead-reckoned frame (the start pose is the
+//! origin), built from the fusion stage's obstacle scans: each bin's ray makes the cells it
+//! passes through freer, its end point's cell more occupied.
+//!
+//! Unlike [`crate::LocalMap`] (a short-lived wrapping map for the fuzzy policy) nothing here
+//! expires: the scan matcher keeps the pose on the map instead. Written by hand for the same
+//! reason: the grid crates on crates.io are ROS-bound or whole SLAM systems.
+
+use hvs_runtime::config::GridConfig;
+use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
+
+use crate::odometry::DeadReckonedPose;
+
+/// A ray stops marking free this share of its length before its point (a ray that meets a
+/// wall at a slant runs beside it for its last stretch and would clear it).
+const FREE_MARGIN: f64 = 0.1;
+
+/// Neighbouring bins agree when their depths differ by at most this share of the depth ...
+const SUPPORT_REL: f64 = 0.1;
+/// ... plus this, metres.
+const SUPPORT_M: f64 = 0.05;
+
+/// What the grid knows about a cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Occupancy {
+    /// Never seen, or seen both ways.
+    Unknown,
+    /// Scan rays passed through it.
+    Free,
+    /// Scan points fell in it.
+    Occupied,
+}
+
+/// A cell index: column (x) and row (y).
+pub type CellIndex = (usize, usize);
+
+/// One scan's points in the grid frame, with the camera position they were seen from.
+#[derive(Debug, Clone)]
+pub struct ScanPoints {
+    /// Camera position, metres.
+    pub camera: (f64, f64),
+    /// Points within the grid's range (metres, grid frame).
+    pub hits: Vec<(f64, f64)>,
+    /// Rays (unit direction, free length in metres) including those beyond the range.
+    pub rays: Vec<((f64, f64), f64)>,
+}
+
+/// The point cloud of a scan in the robot frame: `(ahead_m, left_m)` of the turning centre per
+/// valid bin, with whether it lies within `range_m` of the camera (beyond it only the ray
+/// counts), and the ray's length.
+pub fn scan_in_robot_frame(
+    scan: &ObstacleScan,
+    camera_forward_m: f64,
+    range_m: f64,
+) -> Vec<((f64, f64), bool, f64)> {
+    let mut out = Vec::with_capacity(SCAN_BINS);
+    for i in 0..SCAN_BINS {
+        let depth = f64::from(scan.range_m[i]);
+        if depth <= 0.0 || !depth.is_finite() {
+            continue;
+        }
+        let t = scan.bin_tangent(i);
+        let dist = depth * (1.0 + t * t).sqrt();
+        out.push(((camera_forward_m + depth, depth * t), dist <= range_m, dist));
+    }
+    out
+}
+
+/// Transforms a robot-frame point to the grid frame at `pose`.
+pub fn to_grid_frame(pose: &DeadReckonedPose, p: (f64, f64)) -> (f64, f64) {
+    let (s, c) = pose.heading_rad.sin_cos();
+    (pose.x_m + p.0 * c - p.1 * s, pose.y_m + p.0 * s + p.1 * c)
+}
+
+/// The occupancy grid: a square of `side x side` cells centred on the start pose.
+#[derive(Debug, Clone)]
+pub struct OccupancyGrid {
+    cfg: GridConfig,
+    side: usize,
+    log_odds: Vec<f32>,
+    /// Cells ever updated (for bounding searches): min and max column and row.
+    bounds: Option<(usize, usize, usize, usize)>,
+    /// Scan bins below this one are not used (see [`OccupancyGrid::set_first_bin`]).
+    first_bin: usize,
+}
+
+impl OccupancyGrid {
+    /// An empty grid.
+    pub fn new(cfg: GridConfig) -> Self {
+        let side = ((cfg.extent_m / cfg.cell_m).ceil() as usize).max(8);
+        Self {
+            cfg,
+            side,
+            log_odds: vec![0.0; side * side],
+            bounds: None,
+            first_bin: 0,
+        }
+    }
+
+    /// Leaves out the scan's leftmost `bin` bins: a left-image pixel closer to the image's
+    /// left edge than the matcher's largest disparity can only try the disparities whose
+    /// match fits in the right image, so those columns read far walls where there are near
+    /// ones, and their rays would clear walls the robot is next to.
+    pub fn set_first_bin(&mut self, bin: usize) {
+        self.first_bin = bin.min(SCAN_BINS);
+    }
+
+    /// Cell edge, metres.
+    pub fn cell_m(&self) -> f64 {
+        self.cfg.cell_m
+    }
+
+    /// Cells per side.
+    pub fn side(&self) -> usize {
+        self.side
+    }
+
+    /// The bounding box of every cell ever updated: `(col0, col1, row0, row1)` inclusive.
+    pub fn bounds(&self) -> Option<(usize, usize, usize, usize)> {
+        self.bounds
+    }
+
+    /// The cell holding a point, if inside the grid.
+    pub fn cell_of(&self, x_m: f64, y_m: f64) -> Option<CellIndex> {
+        let half = self.side as f64 * 0.5;
+        let c = (x_m / self.cfg.cell_m + half).floor();
+        let r = (y_m / self.cfg.cell_m + half).floor();
+        if c < 0.0 || r < 0.0 || c >= self.side as f64 || r >= self.side as f64 {
+            return None;
+        }
+        Some((c as usize, r as usize))
+    }
+
+    /// The centre of a cell, metres.
+    pub fn centre(&self, (c, r): CellIndex) -> (f64, f64) {
+        let half = self.side as f64 * 0.5;
+        (
+            (c as f64 + 0.5 - half) * self.cfg.cell_m,
+            (r as f64 + 0.5 - half) * self.cfg.cell_m,
+        )
+    }
+
+    /// A cell's log-odds.
+    pub fn log_odds(&self, (c, r): CellIndex) -> f32 {
+        self.log_odds[r * self.side + c]
+    }
+
+    /// A cell's state.
+    pub fn state(&self, cell: CellIndex) -> Occupancy {
+        let l = f64::from(self.log_odds(cell));
+        if l > self.cfg.decided_log_odds {
+            Occupancy::Occupied
+        } else if l < -self.cfg.decided_log_odds {
+            Occupancy::Free
+        } else {
+            Occupancy::Unknown
+        }
+    }
+
+    /// The state of the cell holding a point (outside the grid: unknown).
+    pub fn state_at(&self, x_m: f64, y_m: f64) -> Occupancy {
+        self.cell_of(x_m, y_m)
+            .map_or(Occupancy::Unknown, |cell| self.state(cell))
+    }
+
+    fn update(&mut self, (c, r): CellIndex, delta: f64) {
+        let i = r * self.side + c;
+        let v = (f64::from(self.log_odds[i]) + delta)
+            .clamp(self.cfg.min_log_odds, self.cfg.max_log_odds);
+        self.log_odds[i] = v as f32;
+        self.bounds = Some(match self.bounds {
+            None => (c, c, r, r),
+            Some((c0, c1, r0, r1)) => (c0.min(c), c1.max(c), r0.min(r), r1.max(r)),
+        });
+    }
+
+    /// One scan's points and rays seen from `pose`, in the grid frame.
+    pub fn scan_points(
+        &self,
+        pose: &DeadReckonedPose,
+        camera_forward_m: f64,
+        scan: &ObstacleScan,
+    ) -> ScanPoints {
+        let camera = to_grid_frame(pose, (camera_forward_m, 0.0));
+        let mut hits = Vec::with_capacity(SCAN_BINS);
+        let mut rays = Vec::with_capacity(SCAN_BINS);
+        let r = &scan.range_m;
+        // A point whose neighbouring bins both disagree with it is a stray match, not a
+        // wall: it marks neither free space nor a hit.
+        let supported = |i: usize| {
+            let d = f64::from(r[i]);
+            [i.checked_sub(1), (i + 1 < SCAN_BINS).then_some(i + 1)]
+                .into_iter()
+                .flatten()
+                .any(|j| {
+                    let n = f64::from(r[j]);
+                    n > 0.0 && (n - d).abs() <= SUPPORT_REL * d + SUPPORT_M
+                })
+        };
+        for (i, &range_m) in r.iter().enumerate().skip(self.first_bin) {
+            let depth = f64::from(range_m);
+            if depth <= 0.0 || !depth.is_finite() || !supported(i) {
+                continue;
+            }
+            let t = scan.bin_tangent(i);
+            let dist = depth * (1.0 + t * t).sqrt();
+            let g = to_grid_frame(pose, (camera_forward_m + depth, depth * t));
+            let d = (g.0 - camera.0).hypot(g.1 - camera.1).max(1e-9);
+            let dir = ((g.0 - camera.0) / d, (g.1 - camera.1) / d);
+            if dist <= self.cfg.scan_range_m {
+                hits.push(g);
+                rays.push((
+                    dir,
+                    (dist * (1.0 - FREE_MARGIN)).min(dist - self.cfg.cell_m),
+                ));
+            } else {
+                rays.push((dir, self.cfg.scan_range_m));
+            }
+        }
+        ScanPoints { camera, hits, rays }
+    }
+
+    /// Adds one scan's points and rays.
+    pub fn insert(&mut self, points: &ScanPoints) {
+        let step = 0.5 * self.cfg.cell_m;
+        let hit_cells: Vec<CellIndex> = points
+            .hits
+            .iter()
+            .filter_map(|&(x, y)| self.cell_of(x, y))
+            .collect();
+        let mut touched: Vec<CellIndex> = Vec::with_capacity(512);
+        for &(dir, free_m) in &points.rays {
+            let mut r = 0.0;
+            let mut last = None;
+            while r < free_m {
+                let p = (points.camera.0 + r * dir.0, points.camera.1 + r * dir.1);
+                r += step;
+                let Some(cell) = self.cell_of(p.0, p.1) else {
+                    break;
+                };
+                if Some(cell) == last || hit_cells.contains(&cell) {
+                    continue;
+                }
+                last = Some(cell);
+                touched.push(cell);
+            }
+        }
+        // Each cell is made freer once per scan, however many rays cross it (near the camera
+        // every ray crosses the same few cells).
+        touched.sort_unstable();
+        touched.dedup();
+        let miss = self.cfg.miss_log_odds;
+        for cell in touched {
+            // A wall fades slowly: a few stray rays do not open it.
+            let delta = if f64::from(self.log_odds(cell)) > self.cfg.decided_log_odds {
+                0.25 * miss
+            } else {
+                miss
+            };
+            self.update(cell, delta);
+        }
+        let mut hit_cells = hit_cells;
+        hit_cells.sort_unstable();
+        hit_cells.dedup();
+        for cell in hit_cells {
+            self.update(cell, self.cfg.hit_log_odds);
+        }
+    }
+
+    /// Whether a cell index is inside the grid after an offset.
+    pub fn offset(&self, (c, r): CellIndex, dc: i64, dr: i64) -> Option<CellIndex> {
+        let (c, r) = (c as i64 + dc, r as i64 + dr);
+        if c < 0 || r < 0 || c >= self.side as i64 || r >= self.side as i64 {
+            None
+        } else {
+            Some((c as usize, r as usize))
+        }
+    }
+
+    /// An ASCII picture of the grid around a point (`#` occupied, `.` free, space unknown,
+    /// `R` the point), north up, for traces.
+    pub fn ascii(&self, x_m: f64, y_m: f64, half_m: f64) -> String {
+        let n = (half_m / self.cfg.cell_m) as i64;
+        let Some(centre) = self.cell_of(x_m, y_m) else {
+            return String::new();
+        };
+        let mut out = String::new();
+        for dr in (-n..=n).rev() {
+            for dc in -n..=n {
+                let ch = match self.offset(centre, dc, dr) {
+                    None => ' ',
+                    Some(_) if dc == 0 && dr == 0 => 'R',
+                    Some(cell) => match self.state(cell) {
+                        Occupancy::Occupied => '#',
+                        Occupancy::Free => '.',
+                        Occupancy::Unknown => ' ',
+                    },
+                };
+                out.push(ch);
+            }
+            out.push('\n');
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn wall_scan(depth_m: f32) -> ObstacleScan {
+        let mut scan = ObstacleScan {
+            tan_half_fov: 0.5,
+            ..ObstacleScan::default()
+        };
+        for r in scan.range_m.iter_mut() {
+            *r = depth_m;
+        }
+        scan
+    }
+
+    #[test]
+    fn a_wall_ahead_is_occupied_and_the_way_to_it_free() {
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        let pose = DeadReckonedPose::default();
+        for _ in 0..3 {
+            let pts = grid.scan_points(&pose, 0.2, &wall_scan(1.5));
+            grid.insert(&pts);
+        }
+        assert_eq!(grid.state_at(1.75, 0.0), Occupancy::Occupied);
+        assert_eq!(grid.state_at(1.0, 0.0), Occupancy::Free);
+        assert_eq!(grid.state_at(2.5, 0.0), Occupancy::Unknown);
+        assert_eq!(grid.state_at(1.0, 2.0), Occupancy::Unknown);
+        // Turned left by 90 degrees, the same scan lands north.
+        let turned = DeadReckonedPose {
+            heading_rad: std::f64::consts::FRAC_PI_2,
+            ..pose
+        };
+        for _ in 0..3 {
+            let pts = grid.scan_points(&turned, 0.2, &wall_scan(1.5));
+            grid.insert(&pts);
+        }
+        assert_eq!(grid.state_at(0.0, 1.75), Occupancy::Occupied);
+    }
+
+    #[test]
+    fn rays_beyond_the_range_mark_free_but_no_wall() {
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        for _ in 0..3 {
+            let pts = grid.scan_points(&DeadReckonedPose::default(), 0.2, &wall_scan(5.0));
+            grid.insert(&pts);
+        }
+        assert_eq!(grid.state_at(1.8, 0.0), Occupancy::Free);
+        assert_eq!(grid.state_at(3.0, 0.0), Occupancy::Unknown);
+        assert_eq!(grid.state_at(5.2, 0.0), Occupancy::Unknown);
+    }
+}

@@ -1,0 +1,450 @@
+//! The exploring navigator (`decision.policy = "explore"`), in Nav2's layers:
+//!
+//! ```text
+//!  obstacle scan ──► scan_match ──► grid (log-odds, dead-reckoned frame, drift-corrected)
+//!                                     │
+//!                                     ▼
+//!                                  costmap (inflated by the footprint)
+//!                                     │
+//!                         planner (Dijkstra from the robot)
+//!                           │                    │
+//!                           ▼                    ▼
+//!                  frontier (choose goal,    path to the goal
+//!                   blacklist)                   │
+//!                                                ▼
+//!                   recovery ◄── progress ── controller ──► motion command
+//! ```
+//!
+//! Each layer is its own file and its own piece of `[nav]`; this file only sequences them per
+//! frame. The wall memberships and intersection types are still computed by the navigator
+//! (perception); a change of intersection type makes the explorer plan again at once.
+
+pub mod controller;
+pub mod costmap;
+pub mod frontier;
+pub mod grid;
+pub mod planner;
+pub mod recovery;
+pub mod scan_match;
+
+use hvs_runtime::config::{NavConfig, PulseTable, RobotConfig};
+use hvs_shared::messages::{IntersectionType, MotionCommand, ObstacleScan, SCAN_BINS};
+
+use crate::odometry::DeadReckonedPose;
+use controller::{ControlInput, Controller, wrap_rad};
+use costmap::Costmap;
+use frontier::{Blacklist, choose, find_frontiers};
+use grid::{CellIndex, OccupancyGrid, scan_in_robot_frame};
+use planner::CostField;
+use recovery::{ProgressChecker, Recovery, RecoveryInput};
+pub use scan_match::PoseCorrection;
+
+/// Extra cost of a frontier whose centre lies in the camera's blind zone, metres.
+const BLIND_FRONTIER_COST_M: f64 = 2.0;
+/// Seconds between retries once no frontier is left.
+const RETRY_S: f64 = 20.0;
+
+/// The goal being driven to and the path there.
+#[derive(Debug, Clone)]
+struct Plan {
+    goal_m: (f64, f64),
+    /// The frontier's centre, looked at from within `view_m`.
+    look_at_m: (f64, f64),
+    path: Vec<(f64, f64)>,
+}
+
+/// Counters for the status line and the tests.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ExploreStatus {
+    /// Plans made.
+    pub plans: u64,
+    /// Frontier clusters found by the last plan.
+    pub frontiers: usize,
+    /// Goals given up on.
+    pub blacklisted: usize,
+    /// Recoveries run.
+    pub recoveries: u64,
+    /// Scans that corrected the pose.
+    pub scan_fixes: u64,
+    /// No reachable frontier is left.
+    pub done: bool,
+}
+
+/// What the explorer sees this frame.
+#[derive(Debug, Clone, Copy)]
+pub struct ExploreInput<'a> {
+    /// The pose (after the scan's correction).
+    pub pose: DeadReckonedPose,
+    /// The obstacle scan.
+    pub scan: &'a ObstacleScan,
+    /// The middle window's range, metres.
+    pub front_m: Option<f64>,
+    /// Turn rate, rad/s.
+    pub turn_rate_rad_s: f64,
+    /// Odometry distance, metres.
+    pub distance_m: f64,
+    /// The intersection type perceived this frame.
+    pub intersection: IntersectionType,
+    /// Now.
+    pub now_ns: u64,
+}
+
+/// The exploring navigator's state.
+#[derive(Debug, Clone)]
+pub struct Explorer {
+    cfg: NavConfig,
+    grid: OccupancyGrid,
+    controller: Controller,
+    half_width_m: f64,
+    camera_forward_m: f64,
+    blacklist: Blacklist,
+    plan: Option<Plan>,
+    last_plan_ns: Option<u64>,
+    replan_now: bool,
+    progress: ProgressChecker,
+    recovery: Option<Recovery>,
+    recoveries_for_goal: u32,
+    last_intersection: IntersectionType,
+    /// When the blacklist was last cleared because exploration looked finished.
+    last_retry_ns: Option<u64>,
+    /// The first frame has been seen (the start spin begun).
+    started: bool,
+    status: ExploreStatus,
+}
+
+impl Explorer {
+    /// An explorer with nothing seen yet.
+    pub fn new(
+        cfg: NavConfig,
+        robot: &RobotConfig,
+        pulses: &PulseTable,
+        camera_forward_m: f64,
+    ) -> Self {
+        Self {
+            cfg,
+            grid: OccupancyGrid::new(cfg.grid),
+            controller: Controller::new(cfg.controller, robot, pulses),
+            half_width_m: 0.5 * robot.width_m,
+            camera_forward_m,
+            blacklist: Blacklist::default(),
+            plan: None,
+            last_plan_ns: None,
+            replan_now: true,
+            progress: ProgressChecker::default(),
+            recovery: None,
+            recoveries_for_goal: 0,
+            last_intersection: IntersectionType::Unknown,
+            last_retry_ns: None,
+            started: false,
+            status: ExploreStatus::default(),
+        }
+    }
+
+    /// Sets where the camera sits ahead of the turning centre, metres.
+    pub fn set_camera_forward_m(&mut self, forward_m: f64) {
+        self.camera_forward_m = forward_m;
+    }
+
+    /// Leaves out the scan bins whose columns lie within the matcher's largest disparity
+    /// of the left image's edge (`max_disp` of an image `width_px` wide).
+    pub fn set_matcher_reach(&mut self, max_disp: u32, width_px: u32) {
+        let bins = (f64::from(max_disp) * SCAN_BINS as f64 / f64::from(width_px.max(1))).ceil();
+        self.grid.set_first_bin(bins as usize);
+    }
+
+    /// The occupancy grid.
+    pub fn grid(&self) -> &OccupancyGrid {
+        &self.grid
+    }
+
+    /// Counters.
+    pub fn status(&self) -> ExploreStatus {
+        self.status
+    }
+
+    /// The goal being driven to, grid frame, metres.
+    pub fn goal_m(&self) -> Option<(f64, f64)> {
+        self.plan.as_ref().map(|p| p.goal_m)
+    }
+
+    /// Whether a recovery behaviour is running.
+    pub fn recovering(&self) -> bool {
+        self.recovery.is_some()
+    }
+
+    /// The correction that aligns `scan` seen from `pose` to the grid, already scaled by the
+    /// configured gain (apply it to the odometry before [`Explorer::step`]).
+    pub fn correction(
+        &mut self,
+        pose: &DeadReckonedPose,
+        scan: &ObstacleScan,
+    ) -> Option<PoseCorrection> {
+        // Early scans would be aligned to themselves.
+        if self.status.plans < 3 {
+            return None;
+        }
+        let points: Vec<(f64, f64)> =
+            scan_in_robot_frame(scan, self.camera_forward_m, self.cfg.grid.scan_range_m)
+                .into_iter()
+                .filter(|&(_, within, _)| within)
+                .map(|(p, _, _)| p)
+                .collect();
+        let fix = scan_match::align(&self.grid, pose, &points, &self.cfg.scan_match)?;
+        self.status.scan_fixes += 1;
+        let g = self.cfg.scan_match.gain;
+        Some(PoseCorrection {
+            dx_m: g * fix.dx_m,
+            dy_m: g * fix.dy_m,
+            dheading_rad: g * fix.dheading_rad,
+            overlap: fix.overlap,
+        })
+    }
+
+    /// One frame: adds the scan to the grid and returns the motion and its PSC ramp.
+    pub fn step(&mut self, input: ExploreInput<'_>) -> (MotionCommand, u32) {
+        let command = self.motion(input);
+        let ramp = match command {
+            MotionCommand::Left | MotionCommand::Right => u32::from(self.cfg.controller.turn_ramp),
+            _ => 0,
+        };
+        (command, ramp)
+    }
+
+    fn motion(&mut self, input: ExploreInput<'_>) -> MotionCommand {
+        let pose = input.pose;
+        // A scan taken while turning fast is placed by a heading that leads or lags the
+        // camera's (command latency): it would smear the walls.
+        if input.scan.valid_bins() > 0
+            && input.turn_rate_rad_s.abs() <= self.cfg.grid.max_turn_rate_deg_s.to_radians()
+        {
+            let pts = self
+                .grid
+                .scan_points(&pose, self.camera_forward_m, input.scan);
+            self.grid.insert(&pts);
+        }
+        if input.intersection != self.last_intersection {
+            self.last_intersection = input.intersection;
+            self.replan_now = true;
+        }
+        if !self.started {
+            self.started = true;
+            if self.cfg.recovery.start_spin_deg > 0.0 {
+                self.recovery = Some(Recovery::look_around(self.cfg.recovery.start_spin_deg));
+            }
+        }
+        if let Some(mut r) = self.recovery.take() {
+            let rin = self.recovery_input(&input);
+            if let Some(cmd) = r.step(&rin) {
+                self.recovery = Some(r);
+                return cmd;
+            }
+            self.recovery = None;
+            self.controller.reset();
+            self.replan_now = true;
+        }
+        let due = self.last_plan_ns.is_none_or(|t| {
+            input.now_ns.saturating_sub(t) as f64 * 1e-9 >= self.cfg.frontier.replan_s
+        });
+        let reached = self.plan.as_ref().is_some_and(|p| {
+            (p.goal_m.0 - pose.x_m).hypot(p.goal_m.1 - pose.y_m) < self.cfg.frontier.reached_m
+        });
+        if reached && let Some(p) = &self.plan {
+            // Driven to and still a frontier after this frame's scan: nothing more to see
+            // from there.
+            let g = p.look_at_m;
+            self.seen(g);
+        }
+        if (self.replan_now || due || reached || self.plan.is_none())
+            && let Some(cmd) = self.replan(&input, reached)
+        {
+            return cmd;
+        }
+        let Some(plan) = &self.plan else {
+            return MotionCommand::Stop;
+        };
+        let look = plan.look_at_m;
+        let d = (look.0 - pose.x_m).hypot(look.1 - pose.y_m);
+        let fcfg = self.cfg.frontier;
+        if d <= fcfg.view_m && d >= fcfg.min_view_m && self.in_sight(&pose, look) {
+            // Close enough to see it: face it, then take it as seen.
+            let towards = [(pose.x_m, pose.y_m), look];
+            let control = self.controller.step(
+                &self.grid,
+                ControlInput {
+                    pose,
+                    path: &towards,
+                    front_m: None,
+                    turn_rate_rad_s: input.turn_rate_rad_s,
+                },
+            );
+            if matches!(
+                control.command,
+                MotionCommand::Forward | MotionCommand::Stop
+            ) {
+                self.seen(look);
+                return MotionCommand::Stop;
+            }
+            return control.command;
+        }
+        let control = self.controller.step(
+            &self.grid,
+            ControlInput {
+                pose,
+                path: &plan.path,
+                front_m: input.front_m,
+                turn_rate_rad_s: input.turn_rate_rad_s,
+            },
+        );
+        if control.blocked {
+            self.replan_now = true;
+        }
+        control.command
+    }
+
+    /// A frontier was looked at or driven to: it is not chosen again (if this frame's scan
+    /// resolved it, it is gone anyway).
+    fn seen(&mut self, p: (f64, f64)) {
+        self.blacklist.add(p);
+        self.status.blacklisted = self.blacklist.len();
+        self.plan = None;
+        self.replan_now = true;
+        self.controller.reset();
+    }
+
+    /// Whether the line from the camera to `p` crosses no occupied cell.
+    fn in_sight(&self, pose: &DeadReckonedPose, p: (f64, f64)) -> bool {
+        let cam = grid::to_grid_frame(pose, (self.camera_forward_m, 0.0));
+        let d = (p.0 - cam.0).hypot(p.1 - cam.1);
+        let step = 0.5 * self.grid.cell_m();
+        let n = (d / step).ceil() as usize;
+        (0..n.saturating_sub(1)).all(|i| {
+            let t = i as f64 * step / d.max(1e-9);
+            self.grid
+                .state_at(cam.0 + t * (p.0 - cam.0), cam.1 + t * (p.1 - cam.1))
+                != grid::Occupancy::Occupied
+        })
+    }
+
+    fn recovery_input(&self, input: &ExploreInput<'_>) -> RecoveryInput {
+        let fp = self.controller.footprint();
+        let left_clear = fp.turn_blocked(&self.grid, &input.pose, true).is_none();
+        let right_clear = fp.turn_blocked(&self.grid, &input.pose, false).is_none();
+        RecoveryInput {
+            now_ns: input.now_ns,
+            distance_m: input.distance_m,
+            heading_rad: input.pose.heading_rad,
+            behind_clear: fp.behind_clear(&self.grid, &input.pose, 0.05),
+            left_clear,
+            right_clear,
+        }
+    }
+
+    /// Builds the costmap, finds frontiers, chooses a goal and its path; checks progress.
+    /// Returns a command when a recovery starts.
+    fn replan(&mut self, input: &ExploreInput<'_>, reached: bool) -> Option<MotionCommand> {
+        let pose = input.pose;
+        self.replan_now = false;
+        self.last_plan_ns = Some(input.now_ns);
+        self.status.plans += 1;
+        let map = Costmap::build(&self.grid, self.cfg.costmap, self.half_width_m);
+        let start = self
+            .grid
+            .cell_of(pose.x_m, pose.y_m)
+            .and_then(|c| map.index(c));
+        let Some(start) = start else {
+            self.plan = None;
+            return None;
+        };
+        let field = CostField::from_start(&map, start);
+        let grid = &self.grid;
+        let centre = |i: usize| grid.centre(map.cell(i));
+        let frontiers = find_frontiers(&map, &field, &self.cfg.frontier, centre);
+        self.status.frontiers = frontiers.len();
+        let previous = if reached {
+            None
+        } else {
+            self.plan.as_ref().map(|p| p.goal_m)
+        };
+        let keep = self.cfg.frontier.keep_goal_m;
+        let fcfg = self.cfg.frontier;
+        let extra_cost = |f: &frontier::Frontier| {
+            let p = f.centroid_m;
+            let turn = wrap_rad((p.1 - pose.y_m).atan2(p.0 - pose.x_m) - pose.heading_rad);
+            let g = centre(f.goal);
+            // The goal being driven to is ranked cheaper (hysteresis).
+            let kept = previous.is_some_and(|q| (q.0 - g.0).hypot(q.1 - g.1) < 0.6);
+            // A frontier in the blind zone cannot be seen from here: drive away and back.
+            let blind = (p.0 - pose.x_m).hypot(p.1 - pose.y_m) < fcfg.min_view_m;
+            fcfg.turn_weight * turn.abs() - if kept { keep } else { 0.0 }
+                + if blind { BLIND_FRONTIER_COST_M } else { 0.0 }
+        };
+        let chosen = choose(&frontiers, &fcfg, map.cell_m(), &self.blacklist, extra_cost).cloned();
+        let Some(f) = chosen else {
+            self.plan = None;
+            self.status.done = true;
+            // Everything left was given up on, or the map shows no way out (a wall seen
+            // wrongly can close it): look around and try every goal again, now and then.
+            let since = self.last_retry_ns.map_or(f64::INFINITY, |t| {
+                input.now_ns.saturating_sub(t) as f64 * 1e-9
+            });
+            if since >= RETRY_S {
+                self.last_retry_ns = Some(input.now_ns);
+                self.blacklist.clear();
+                self.status.blacklisted = 0;
+                self.replan_now = true;
+                if self.cfg.recovery.rotate_deg > 0.0 {
+                    let mut r = Recovery::look_around(self.cfg.recovery.rotate_deg);
+                    let cmd = r.step(&self.recovery_input(input));
+                    self.recovery = Some(r);
+                    return cmd;
+                }
+            }
+            return None;
+        };
+        self.status.done = false;
+        let goal_m = centre(f.goal);
+        let new_goal = previous.is_none_or(|g| (g.0 - goal_m.0).hypot(g.1 - goal_m.1) > 0.6);
+        if new_goal {
+            self.progress.reset();
+            self.recoveries_for_goal = 0;
+        }
+        let path: Vec<(f64, f64)> = field
+            .path_to(f.goal)
+            .unwrap_or_default()
+            .into_iter()
+            .map(centre)
+            .collect();
+        self.plan = Some(Plan {
+            goal_m,
+            look_at_m: f.centroid_m,
+            path,
+        });
+        if self
+            .progress
+            .stalled(&self.cfg.recovery, f.distance_m, input.now_ns)
+        {
+            self.progress.reset();
+            self.recoveries_for_goal += 1;
+            if self.recoveries_for_goal > self.cfg.recovery.max_per_goal {
+                self.blacklist.add(f.centroid_m);
+                self.status.blacklisted = self.blacklist.len();
+                self.plan = None;
+                self.replan_now = true;
+                self.recoveries_for_goal = 0;
+            }
+            self.status.recoveries += 1;
+            let rin = self.recovery_input(input);
+            let mut r = Recovery::start(&self.cfg.recovery, &rin);
+            let cmd = r.step(&rin);
+            self.recovery = Some(r);
+            self.controller.reset();
+            return cmd;
+        }
+        None
+    }
+
+    /// The cell of a point, for tests and traces.
+    pub fn cell_of(&self, x_m: f64, y_m: f64) -> Option<CellIndex> {
+        self.grid.cell_of(x_m, y_m)
+    }
+}

@@ -1,0 +1,254 @@
+//! Progress checking and recovery behaviours, as small state machines (Nav2's progress
+//! checker and behaviour server): when the robot has not got `progress_m` nearer its goal
+//! within `progress_timeout_s`, it backs up, rotates and waits, then plans again; a goal that
+//! needed more than `max_per_goal` recoveries is given up.
+
+use hvs_runtime::config::RecoveryConfig;
+use hvs_shared::messages::MotionCommand;
+
+/// Watches the path cost to the goal.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ProgressChecker {
+    /// Best path cost to the goal so far, and when it was last improved by `progress_m`.
+    anchor: Option<(f64, u64)>,
+}
+
+impl ProgressChecker {
+    /// Starts watching afresh (new goal, or after a recovery).
+    pub fn reset(&mut self) {
+        self.anchor = None;
+    }
+
+    /// Feeds the path cost to the goal at `now_ns`; true when progress has stalled.
+    pub fn stalled(&mut self, cfg: &RecoveryConfig, goal_cost_m: f64, now_ns: u64) -> bool {
+        match self.anchor {
+            None => {
+                self.anchor = Some((goal_cost_m, now_ns));
+                false
+            }
+            Some((best, since)) => {
+                if goal_cost_m <= best - cfg.progress_m {
+                    self.anchor = Some((goal_cost_m, now_ns));
+                    false
+                } else {
+                    now_ns.saturating_sub(since) as f64 * 1e-9 > cfg.progress_timeout_s
+                }
+            }
+        }
+    }
+}
+
+/// One recovery behaviour.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Behaviour {
+    /// Back up `distance_m` (from the odometry distance when it starts).
+    BackUp {
+        /// How far, metres.
+        distance_m: f64,
+        /// Odometry distance at which it ends, once started.
+        until_m: Option<f64>,
+    },
+    /// Rotate in place by `target_rad`.
+    Rotate {
+        /// Turn to make, radians.
+        target_rad: f64,
+        /// Counter-clockwise.
+        left: bool,
+        /// Heading when it started.
+        start_rad: Option<f64>,
+    },
+    /// Stand still for `wait_s`.
+    Wait {
+        /// How long, seconds.
+        wait_s: f64,
+        /// End time, once started.
+        until_ns: Option<u64>,
+    },
+}
+
+/// What a recovery step sees.
+#[derive(Debug, Clone, Copy)]
+pub struct RecoveryInput {
+    /// Now.
+    pub now_ns: u64,
+    /// Odometry distance, metres.
+    pub distance_m: f64,
+    /// Heading, radians.
+    pub heading_rad: f64,
+    /// Backing up is clear.
+    pub behind_clear: bool,
+    /// The disc the footprint sweeps turning left holds no seen obstacle.
+    pub left_clear: bool,
+    /// The same turning right.
+    pub right_clear: bool,
+}
+
+/// Rotations are cut into steps of at most this much with a pause after each, so that the
+/// scans taken while standing enter the map (scans taken while turning fast do not).
+const ROTATE_STEP_RAD: f64 = 0.8;
+/// The pause after a rotation step, seconds.
+const ROTATE_PAUSE_S: f64 = 0.35;
+
+/// A running sequence of behaviours.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recovery {
+    steps: Vec<Behaviour>,
+}
+
+/// Rotation steps of `total_rad`, each followed by a pause.
+fn rotation(total_rad: f64, left: bool) -> Vec<Behaviour> {
+    let n = (total_rad / ROTATE_STEP_RAD).ceil().max(1.0) as usize;
+    let mut out = Vec::with_capacity(2 * n);
+    for _ in 0..n {
+        out.push(Behaviour::Rotate {
+            target_rad: total_rad / n as f64,
+            left,
+            start_rad: None,
+        });
+        out.push(Behaviour::Wait {
+            wait_s: ROTATE_PAUSE_S,
+            until_ns: None,
+        });
+    }
+    out
+}
+
+impl Recovery {
+    /// Starts a recovery: back up (when clear behind), rotate toward the freer side, wait.
+    pub fn start(cfg: &RecoveryConfig, input: &RecoveryInput) -> Self {
+        let mut steps = Vec::new();
+        if input.behind_clear && cfg.backup_m > 0.0 {
+            steps.push(Behaviour::BackUp {
+                distance_m: cfg.backup_m,
+                until_m: None,
+            });
+        }
+        if cfg.rotate_deg > 0.0 {
+            let left = input.left_clear || !input.right_clear;
+            steps.extend(rotation(cfg.rotate_deg.to_radians(), left));
+        }
+        steps.push(Behaviour::Wait {
+            wait_s: cfg.wait_s,
+            until_ns: None,
+        });
+        steps.reverse();
+        Self { steps }
+    }
+
+    /// A look around: rotate in place by `degrees` counter-clockwise, pausing on the way.
+    pub fn look_around(degrees: f64) -> Self {
+        let mut steps = rotation(degrees.to_radians(), true);
+        steps.reverse();
+        Self { steps }
+    }
+
+    /// The behaviour running now.
+    pub fn behaviour(&self) -> Option<Behaviour> {
+        self.steps.last().copied()
+    }
+
+    /// The command for this frame, or `None` once the sequence is over.
+    pub fn step(&mut self, input: &RecoveryInput) -> Option<MotionCommand> {
+        while let Some(b) = self.steps.last_mut() {
+            let command = match b {
+                Behaviour::BackUp {
+                    distance_m,
+                    until_m,
+                } => {
+                    let until = *until_m.get_or_insert(input.distance_m + *distance_m);
+                    (input.distance_m < until && input.behind_clear)
+                        .then_some(MotionCommand::Reverse)
+                }
+                Behaviour::Rotate {
+                    target_rad,
+                    left,
+                    start_rad,
+                } => {
+                    let start = *start_rad.get_or_insert(input.heading_rad);
+                    // A rotation stops where an obstacle enters its disc.
+                    let clear = if *left {
+                        input.left_clear
+                    } else {
+                        input.right_clear
+                    };
+                    (clear && (input.heading_rad - start).abs() < *target_rad).then_some(if *left {
+                        MotionCommand::Left
+                    } else {
+                        MotionCommand::Right
+                    })
+                }
+                Behaviour::Wait { wait_s, until_ns } => {
+                    let until = *until_ns
+                        .get_or_insert(input.now_ns.saturating_add((*wait_s * 1e9) as u64));
+                    (input.now_ns < until).then_some(MotionCommand::Stop)
+                }
+            };
+            if command.is_some() {
+                return command;
+            }
+            self.steps.pop();
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_stalls_only_after_the_timeout_without_getting_nearer() {
+        let cfg = RecoveryConfig::default();
+        let mut p = ProgressChecker::default();
+        let s = 1_000_000_000u64;
+        assert!(!p.stalled(&cfg, 5.0, 0));
+        assert!(!p.stalled(&cfg, 4.95, 3 * s));
+        assert!(p.stalled(&cfg, 4.95, 7 * s));
+        p.reset();
+        assert!(!p.stalled(&cfg, 4.0, 8 * s));
+        assert!(!p.stalled(&cfg, 3.0, 13 * s));
+        assert!(!p.stalled(&cfg, 3.0, 18 * s));
+        assert!(p.stalled(&cfg, 3.0, 20 * s));
+    }
+
+    #[test]
+    fn a_recovery_backs_up_rotates_in_steps_waits_and_ends() {
+        let cfg = RecoveryConfig::default();
+        let mut input = RecoveryInput {
+            now_ns: 0,
+            distance_m: 10.0,
+            heading_rad: 0.0,
+            behind_clear: true,
+            left_clear: true,
+            right_clear: true,
+        };
+        let mut r = Recovery::start(&cfg, &input);
+        assert_eq!(r.step(&input), Some(MotionCommand::Reverse));
+        input.distance_m += cfg.backup_m;
+        let mut lefts = 0;
+        let mut pauses = 0;
+        for _ in 0..1000 {
+            match r.step(&input) {
+                Some(MotionCommand::Left) => {
+                    lefts += 1;
+                    input.heading_rad += 0.1;
+                }
+                Some(MotionCommand::Stop) => {
+                    pauses += 1;
+                    input.now_ns += 100_000_000;
+                }
+                None => break,
+                other => panic!("unexpected {other:?}"),
+            }
+        }
+        assert_eq!(r.step(&input), None);
+        assert!((lefts as f64 * 0.1 - cfg.rotate_deg.to_radians()).abs() < 0.25);
+        assert!(pauses >= 4, "{pauses}");
+        // Nothing clear behind: straight to rotating.
+        input.behind_clear = false;
+        let r = Recovery::start(&cfg, &input);
+        assert!(matches!(r.behaviour(), Some(Behaviour::Rotate { .. })));
+        let mut look = Recovery::look_around(360.0);
+        assert_eq!(look.step(&input), Some(MotionCommand::Left));
+    }
+}

@@ -1,0 +1,426 @@
+//! `[nav]`: the exploring navigator (`decision.policy = "explore"`): every number it tunes, in
+//! one section with units, one sub-table per layer (Nav2's split: the map, the costmap, the
+//! frontiers, the planner, the controller, the recovery behaviours). The footprint is not
+//! here: it comes from `[robot]`, which the simulator's robot also uses.
+
+use serde::{Deserialize, Serialize};
+
+use super::Invalid;
+
+/// Checks that each `(key, value, lo, hi)` lies in `lo..=hi`, naming the first that does not.
+fn check_ranges(prefix: &str, checks: &[(&str, f64, f64, f64)]) -> Result<(), Invalid> {
+    for &(key, value, lo, hi) in checks {
+        if !(lo..=hi).contains(&value) {
+            return Err(Invalid::new(
+                format!("{prefix}.{key}"),
+                format!("= {value} must be in {lo}..={hi}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The log-odds occupancy grid built from the obstacle scans (`[nav.grid]`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GridConfig {
+    /// Cell edge, metres.
+    pub cell_m: f64,
+    /// Edge of the square area the grid can hold, centred on the start, metres.
+    pub extent_m: f64,
+    /// Log-odds added to the cell a scan point falls in.
+    pub hit_log_odds: f64,
+    /// Log-odds added to a cell a scan ray passes through (negative).
+    pub miss_log_odds: f64,
+    /// Lower clamp of a cell's log-odds.
+    pub min_log_odds: f64,
+    /// Upper clamp of a cell's log-odds.
+    pub max_log_odds: f64,
+    /// A cell is occupied above this log-odds, free below its negative.
+    pub decided_log_odds: f64,
+    /// Scan points farther than this are not marked (their ray marks free up to it), metres.
+    pub scan_range_m: f64,
+    /// Scans taken while turning faster than this are not added, degrees per second.
+    pub max_turn_rate_deg_s: f64,
+}
+
+impl Default for GridConfig {
+    fn default() -> Self {
+        Self {
+            cell_m: 0.1,
+            extent_m: 60.0,
+            hit_log_odds: 0.35,
+            miss_log_odds: -0.4,
+            min_log_odds: -2.0,
+            max_log_odds: 3.5,
+            decided_log_odds: 0.8,
+            scan_range_m: 2.0,
+            max_turn_rate_deg_s: 20.0,
+        }
+    }
+}
+
+impl GridConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_ranges(
+            "grid",
+            &[
+                ("cell_m", self.cell_m, 0.02, 0.5),
+                ("extent_m", self.extent_m, 5.0, 500.0),
+                ("hit_log_odds", self.hit_log_odds, 0.01, 10.0),
+                ("miss_log_odds", self.miss_log_odds, -10.0, -0.01),
+                ("min_log_odds", self.min_log_odds, -50.0, -0.01),
+                ("max_log_odds", self.max_log_odds, 0.01, 50.0),
+                ("decided_log_odds", self.decided_log_odds, 0.01, 10.0),
+                ("scan_range_m", self.scan_range_m, 0.5, 20.0),
+                ("max_turn_rate_deg_s", self.max_turn_rate_deg_s, 0.0, 1000.0),
+            ],
+        )?;
+        if self.extent_m / self.cell_m > 4096.0 {
+            return Err(Invalid::new(
+                "grid.extent_m",
+                format!(
+                    "= {} is more than 4096 cells of {} m",
+                    self.extent_m, self.cell_m
+                ),
+            ));
+        }
+        if self.decided_log_odds >= self.max_log_odds || -self.decided_log_odds <= self.min_log_odds
+        {
+            return Err(Invalid::new(
+                "grid.decided_log_odds",
+                "must lie between min_log_odds and max_log_odds in magnitude",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Drift correction: each scan aligned to the grid before it is added (`[nav.scan_match]`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScanMatchConfig {
+    /// Align scans at all.
+    pub enabled: bool,
+    /// Search half-width in x and y around the dead-reckoned pose, metres.
+    pub search_m: f64,
+    /// Search step in x and y, metres.
+    pub step_m: f64,
+    /// Search half-width in heading, degrees.
+    pub search_deg: f64,
+    /// Search step in heading, degrees.
+    pub step_deg: f64,
+    /// Scan points within the grid's range needed to try an alignment.
+    pub min_points: u32,
+    /// Share of the points that must land on occupied cells at the best pose.
+    pub min_overlap: f64,
+    /// Share of the found correction applied per scan (0..1).
+    pub gain: f64,
+}
+
+impl Default for ScanMatchConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            search_m: 0.1,
+            step_m: 0.05,
+            search_deg: 3.0,
+            step_deg: 1.0,
+            min_points: 16,
+            min_overlap: 0.5,
+            gain: 0.5,
+        }
+    }
+}
+
+impl ScanMatchConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_ranges(
+            "scan_match",
+            &[
+                ("search_m", self.search_m, 0.0, 1.0),
+                ("step_m", self.step_m, 0.005, 0.5),
+                ("search_deg", self.search_deg, 0.0, 30.0),
+                ("step_deg", self.step_deg, 0.1, 10.0),
+                ("min_points", f64::from(self.min_points), 1.0, 64.0),
+                ("min_overlap", self.min_overlap, 0.0, 1.0),
+                ("gain", self.gain, 0.0, 1.0),
+            ],
+        )
+    }
+}
+
+/// The costmap the planner and the controller read (`[nav.costmap]`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CostmapConfig {
+    /// Clearance kept beyond the footprint's half-width: occupied cells are lethal within
+    /// `robot.width_m / 2 + clearance_m`, metres.
+    pub clearance_m: f64,
+    /// Beyond the lethal band the cost falls to 0 over this distance, metres.
+    pub decay_m: f64,
+    /// Cost of a cell right at the lethal band, in metres of path (the planner adds it per
+    /// cell, so it trades this much detour for keeping off walls).
+    pub wall_cost_m: f64,
+    /// Extra cost of crossing an unknown cell, in metres of path per cell.
+    pub unknown_cost_m: f64,
+}
+
+impl Default for CostmapConfig {
+    fn default() -> Self {
+        Self {
+            clearance_m: 0.05,
+            decay_m: 0.35,
+            wall_cost_m: 0.6,
+            unknown_cost_m: 0.05,
+        }
+    }
+}
+
+impl CostmapConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_ranges(
+            "costmap",
+            &[
+                ("clearance_m", self.clearance_m, 0.0, 1.0),
+                ("decay_m", self.decay_m, 0.0, 3.0),
+                ("wall_cost_m", self.wall_cost_m, 0.0, 100.0),
+                ("unknown_cost_m", self.unknown_cost_m, 0.0, 100.0),
+            ],
+        )
+    }
+}
+
+/// Frontier choice (`[nav.frontier]`, explore_lite's cost: distance against size).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FrontierConfig {
+    /// Frontiers shorter than this are ignored, metres.
+    pub min_size_m: f64,
+    /// Weight of the path length to a frontier, per metre.
+    pub distance_weight: f64,
+    /// Weight of a frontier's size, per metre (subtracted).
+    pub size_weight: f64,
+    /// Weight of turning to face a frontier, per radian.
+    pub turn_weight: f64,
+    /// Goals within this distance of a blacklisted one are not chosen, metres.
+    pub blacklist_radius_m: f64,
+    /// Seconds between frontier searches while a goal is being driven to.
+    pub replan_s: f64,
+    /// A goal closer than this to the robot's centre counts as reached, metres.
+    pub reached_m: f64,
+    /// The frontier of the goal being driven to is ranked this much cheaper, metres (keeps
+    /// two similar frontiers from taking turns).
+    pub keep_goal_m: f64,
+    /// A frontier whose centre is within this distance, in line of sight, is looked at
+    /// (turning to face it) instead of driven to, metres.
+    pub view_m: f64,
+    /// ... but not nearer than this: the camera is blind close up (the matcher's largest
+    /// disparity), metres from the turning centre.
+    pub min_view_m: f64,
+}
+
+impl Default for FrontierConfig {
+    fn default() -> Self {
+        Self {
+            min_size_m: 0.3,
+            distance_weight: 1.0,
+            size_weight: 0.3,
+            turn_weight: 0.3,
+            blacklist_radius_m: 0.4,
+            replan_s: 1.0,
+            reached_m: 0.3,
+            keep_goal_m: 1.0,
+            view_m: 1.5,
+            min_view_m: 0.7,
+        }
+    }
+}
+
+impl FrontierConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_ranges(
+            "frontier",
+            &[
+                ("min_size_m", self.min_size_m, 0.0, 10.0),
+                ("distance_weight", self.distance_weight, 0.0, 100.0),
+                ("size_weight", self.size_weight, 0.0, 100.0),
+                ("turn_weight", self.turn_weight, 0.0, 100.0),
+                ("blacklist_radius_m", self.blacklist_radius_m, 0.0, 10.0),
+                ("replan_s", self.replan_s, 0.05, 60.0),
+                ("reached_m", self.reached_m, 0.05, 5.0),
+                ("keep_goal_m", self.keep_goal_m, 0.0, 100.0),
+                ("view_m", self.view_m, 0.0, 20.0),
+                ("min_view_m", self.min_view_m, 0.0, 20.0),
+            ],
+        )
+    }
+}
+
+/// The path follower for the skid-steer base (`[nav.controller]`): turns in place toward the
+/// path, drives ahead along it, through the pulse table's five motions.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerConfig {
+    /// The point followed lies this far along the path, metres.
+    pub lookahead_m: f64,
+    /// A heading error beyond this starts a turn in place, degrees.
+    pub turn_above_deg: f64,
+    /// A turn in place ends once the heading error is below this, degrees.
+    pub aligned_deg: f64,
+    /// Turns stop this long before the target by their current rate (command latency), s.
+    pub turn_lead_s: f64,
+    /// The footprint swept this far ahead must be clear to drive ahead, metres.
+    pub check_ahead_m: f64,
+    /// A front range (middle window) nearer than this stops driving ahead, metres.
+    pub stop_range_m: f64,
+    /// PSC ramp code (0..63; 0 = at once, 1 = 0.75 s .. 63 = 60 s for the full pulse range)
+    /// for turns: a turn that starts gently stops where it was meant to, and a scan taken
+    /// early in it is placed well.
+    pub turn_ramp: u8,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        Self {
+            lookahead_m: 0.45,
+            turn_above_deg: 20.0,
+            aligned_deg: 6.0,
+            turn_lead_s: 0.1,
+            check_ahead_m: 0.12,
+            stop_range_m: 0.3,
+            turn_ramp: 8,
+        }
+    }
+}
+
+impl ControllerConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_ranges(
+            "controller",
+            &[
+                ("lookahead_m", self.lookahead_m, 0.05, 5.0),
+                ("turn_above_deg", self.turn_above_deg, 1.0, 180.0),
+                ("aligned_deg", self.aligned_deg, 0.5, 90.0),
+                ("turn_lead_s", self.turn_lead_s, 0.0, 1.0),
+                ("check_ahead_m", self.check_ahead_m, 0.0, 2.0),
+                ("stop_range_m", self.stop_range_m, 0.0, 5.0),
+                ("turn_ramp", f64::from(self.turn_ramp), 0.0, 63.0),
+            ],
+        )?;
+        if self.aligned_deg >= self.turn_above_deg {
+            return Err(Invalid::new(
+                "controller.aligned_deg",
+                format!(
+                    "= {} must be below turn_above_deg ({})",
+                    self.aligned_deg, self.turn_above_deg
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The progress checker and the recovery behaviours (`[nav.recovery]`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecoveryConfig {
+    /// The robot must get this much nearer its goal (or move this far) ...
+    pub progress_m: f64,
+    /// ... within this many seconds, or the recovery behaviours start.
+    pub progress_timeout_s: f64,
+    /// Back-up distance, metres.
+    pub backup_m: f64,
+    /// Rotation in place after backing up, degrees.
+    pub rotate_deg: f64,
+    /// Standing still after rotating, seconds.
+    pub wait_s: f64,
+    /// Recoveries for one goal before it is blacklisted.
+    pub max_per_goal: u32,
+    /// Turn in place this far before exploring, to see around the start, degrees (0: no).
+    pub start_spin_deg: f64,
+}
+
+impl Default for RecoveryConfig {
+    fn default() -> Self {
+        Self {
+            progress_m: 0.15,
+            progress_timeout_s: 6.0,
+            backup_m: 0.15,
+            rotate_deg: 90.0,
+            wait_s: 0.5,
+            max_per_goal: 1,
+            start_spin_deg: 0.0,
+        }
+    }
+}
+
+impl RecoveryConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_ranges(
+            "recovery",
+            &[
+                ("progress_m", self.progress_m, 0.01, 5.0),
+                ("progress_timeout_s", self.progress_timeout_s, 0.5, 600.0),
+                ("backup_m", self.backup_m, 0.0, 2.0),
+                ("rotate_deg", self.rotate_deg, 0.0, 360.0),
+                ("wait_s", self.wait_s, 0.0, 60.0),
+                ("max_per_goal", f64::from(self.max_per_goal), 0.0, 100.0),
+                ("start_spin_deg", self.start_spin_deg, 0.0, 720.0),
+            ],
+        )
+    }
+}
+
+/// The exploring navigator's settings, one sub-table per layer.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NavConfig {
+    /// The occupancy grid.
+    pub grid: GridConfig,
+    /// Scan-to-grid alignment (drift correction).
+    pub scan_match: ScanMatchConfig,
+    /// The costmap.
+    pub costmap: CostmapConfig,
+    /// Frontier choice.
+    pub frontier: FrontierConfig,
+    /// The path follower.
+    pub controller: ControllerConfig,
+    /// Progress checking and recovery.
+    pub recovery: RecoveryConfig,
+}
+
+impl NavConfig {
+    /// Checks every sub-table; the key of an error is below the section (`grid.cell_m`).
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.grid.validate()?;
+        self.scan_match.validate()?;
+        self.costmap.validate()?;
+        self.frontier.validate()?;
+        self.controller.validate()?;
+        self.recovery.validate()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_a_bad_value_is_named_with_its_table() {
+        assert_eq!(NavConfig::default().validate(), Ok(()));
+        let mut c = NavConfig::default();
+        c.grid.cell_m = 0.0;
+        assert_eq!(c.validate().map_err(|e| e.key), Err("grid.cell_m".into()));
+        let mut c = NavConfig::default();
+        c.controller.aligned_deg = 30.0;
+        assert_eq!(
+            c.validate().map_err(|e| e.key),
+            Err("controller.aligned_deg".into())
+        );
+        let mut c = NavConfig::default();
+        c.grid.extent_m = 500.0;
+        c.grid.cell_m = 0.02;
+        assert_eq!(c.validate().map_err(|e| e.key), Err("grid.extent_m".into()));
+    }
+}
