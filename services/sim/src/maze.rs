@@ -9,7 +9,9 @@
 //! slots make 66 x 66 cells, 11.55 m square, the size of `config/maps/maze.txt`.
 //!
 //! * Which slots connect: a random spanning tree of the slot lattice (every slot reachable),
-//!   plus extra connections that close loops (about one per five slots, at least one).
+//!   plus extra connections that close loops (about one per five slots, at least one from
+//!   3x3 slots up: a 2x2 lattice's one spare edge joins the tree's two ends, one of them the
+//!   kept dead end, so a 2x2 maze has no loop).
 //! * Each connection is a doorway 0.7, 0.875 or 1.05 m wide in the middle of the wall
 //!   between the two slots; one connection between two rooms may instead take the whole wall
 //!   away (one larger room).

@@ -31,12 +31,20 @@ pub struct Costmap {
 }
 
 impl Costmap {
-    /// Inflates `grid` for a robot of half-width `half_width_m`.
-    pub fn build(grid: &OccupancyGrid, cfg: CostmapConfig, half_width_m: f64) -> Self {
+    /// Inflates `grid` for a robot of half-width `half_width_m`; the window covers what has
+    /// been seen and the cell `robot` stands in (which no scan ray of a forward camera
+    /// crosses).
+    pub fn build(
+        grid: &OccupancyGrid,
+        cfg: CostmapConfig,
+        half_width_m: f64,
+        robot: CellIndex,
+    ) -> Self {
         let side = grid.side();
-        let (c0, c1, r0, r1) = grid
-            .bounds()
-            .unwrap_or((side / 2, side / 2, side / 2, side / 2));
+        let (rc, rr) = robot;
+        let (c0, c1, r0, r1) = grid.bounds().map_or((rc, rc, rr, rr), |(c0, c1, r0, r1)| {
+            (c0.min(rc), c1.max(rc), r0.min(rr), r1.max(rr))
+        });
         let c0 = c0.saturating_sub(MARGIN_CELLS);
         let r0 = r0.saturating_sub(MARGIN_CELLS);
         let c1 = (c1 + MARGIN_CELLS).min(side - 1);
@@ -218,7 +226,8 @@ mod tests {
             let pts = grid.scan_points(&DeadReckonedPose::default(), 0.2, &scan);
             grid.insert(&pts);
         }
-        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155);
+        let robot = grid.cell_of(0.0, 0.0).expect("inside");
+        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, robot);
         let at = |x: f64| {
             grid.cell_of(x, 0.0)
                 .and_then(|c| map.index(c))

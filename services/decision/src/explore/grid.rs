@@ -45,27 +45,6 @@ pub struct ScanPoints {
     pub rays: Vec<((f64, f64), f64)>,
 }
 
-/// The point cloud of a scan in the robot frame: `(ahead_m, left_m)` of the turning centre per
-/// valid bin, with whether it lies within `range_m` of the camera (beyond it only the ray
-/// counts), and the ray's length.
-pub fn scan_in_robot_frame(
-    scan: &ObstacleScan,
-    camera_forward_m: f64,
-    range_m: f64,
-) -> Vec<((f64, f64), bool, f64)> {
-    let mut out = Vec::with_capacity(SCAN_BINS);
-    for i in 0..SCAN_BINS {
-        let depth = f64::from(scan.range_m[i]);
-        if depth <= 0.0 || !depth.is_finite() {
-            continue;
-        }
-        let t = scan.bin_tangent(i);
-        let dist = depth * (1.0 + t * t).sqrt();
-        out.push(((camera_forward_m + depth, depth * t), dist <= range_m, dist));
-    }
-    out
-}
-
 /// Transforms a robot-frame point to the grid frame at `pose`.
 pub fn to_grid_frame(pose: &DeadReckonedPose, p: (f64, f64)) -> (f64, f64) {
     let (s, c) = pose.heading_rad.sin_cos();
@@ -174,19 +153,11 @@ impl OccupancyGrid {
         });
     }
 
-    /// One scan's points and rays seen from `pose`, in the grid frame.
-    pub fn scan_points(
-        &self,
-        pose: &DeadReckonedPose,
-        camera_forward_m: f64,
-        scan: &ObstacleScan,
-    ) -> ScanPoints {
-        let camera = to_grid_frame(pose, (camera_forward_m, 0.0));
-        let mut hits = Vec::with_capacity(SCAN_BINS);
-        let mut rays = Vec::with_capacity(SCAN_BINS);
+    /// The scan bins the grid trusts, as robot-frame points `(ahead_m, left_m)` with their
+    /// distance from the camera: not left of `first_bin`, and not a stray point (one whose
+    /// neighbouring bins both disagree with it).
+    fn trusted_bins(&self, scan: &ObstacleScan, camera_forward_m: f64) -> Vec<((f64, f64), f64)> {
         let r = &scan.range_m;
-        // A point whose neighbouring bins both disagree with it is a stray match, not a
-        // wall: it marks neither free space nor a hit.
         let supported = |i: usize| {
             let d = f64::from(r[i]);
             [i.checked_sub(1), (i + 1 < SCAN_BINS).then_some(i + 1)]
@@ -197,14 +168,51 @@ impl OccupancyGrid {
                     n > 0.0 && (n - d).abs() <= SUPPORT_REL * d + SUPPORT_M
                 })
         };
+        let mut out = Vec::with_capacity(SCAN_BINS);
         for (i, &range_m) in r.iter().enumerate().skip(self.first_bin) {
             let depth = f64::from(range_m);
             if depth <= 0.0 || !depth.is_finite() || !supported(i) {
                 continue;
             }
             let t = scan.bin_tangent(i);
-            let dist = depth * (1.0 + t * t).sqrt();
-            let g = to_grid_frame(pose, (camera_forward_m + depth, depth * t));
+            out.push((
+                (camera_forward_m + depth, depth * t),
+                depth * (1.0 + t * t).sqrt(),
+            ));
+        }
+        out
+    }
+
+    /// The scan's trusted points within the grid's range, robot frame (for the matcher).
+    pub fn scan_hits_robot_frame(
+        &self,
+        scan: &ObstacleScan,
+        camera_forward_m: f64,
+    ) -> Vec<(f64, f64)> {
+        self.trusted_bins(scan, camera_forward_m)
+            .into_iter()
+            .filter(|&(_, dist)| dist <= self.cfg.scan_range_m)
+            .map(|(p, _)| p)
+            .collect()
+    }
+
+    /// The first scan bin used.
+    pub fn first_bin(&self) -> usize {
+        self.first_bin
+    }
+
+    /// One scan's points and rays seen from `pose`, in the grid frame.
+    pub fn scan_points(
+        &self,
+        pose: &DeadReckonedPose,
+        camera_forward_m: f64,
+        scan: &ObstacleScan,
+    ) -> ScanPoints {
+        let camera = to_grid_frame(pose, (camera_forward_m, 0.0));
+        let mut hits = Vec::with_capacity(SCAN_BINS);
+        let mut rays = Vec::with_capacity(SCAN_BINS);
+        for ((ahead, left), dist) in self.trusted_bins(scan, camera_forward_m) {
+            let g = to_grid_frame(pose, (ahead, left));
             let d = (g.0 - camera.0).hypot(g.1 - camera.1).max(1e-9);
             let dir = ((g.0 - camera.0) / d, (g.1 - camera.1) / d);
             if dist <= self.cfg.scan_range_m {

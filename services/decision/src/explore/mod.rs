@@ -34,7 +34,7 @@ use crate::odometry::DeadReckonedPose;
 use controller::{ControlInput, Controller, wrap_rad};
 use costmap::Costmap;
 use frontier::{Blacklist, choose, find_frontiers};
-use grid::{CellIndex, OccupancyGrid, scan_in_robot_frame};
+use grid::{CellIndex, OccupancyGrid};
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
 pub use scan_match::PoseCorrection;
@@ -152,6 +152,11 @@ impl Explorer {
         self.grid.set_first_bin(bins as usize);
     }
 
+    /// Leaves out the scan's leftmost `bin` bins (see [`OccupancyGrid::set_first_bin`]).
+    pub fn set_first_bin(&mut self, bin: usize) {
+        self.grid.set_first_bin(bin);
+    }
+
     /// The occupancy grid.
     pub fn grid(&self) -> &OccupancyGrid {
         &self.grid
@@ -178,17 +183,16 @@ impl Explorer {
         &mut self,
         pose: &DeadReckonedPose,
         scan: &ObstacleScan,
+        turn_rate_rad_s: f64,
     ) -> Option<PoseCorrection> {
-        // Early scans would be aligned to themselves.
-        if self.status.plans < 3 {
+        // Early scans would be aligned to themselves; a scan taken while turning fast is
+        // placed by a heading that leads the camera's, and is not added to the grid either.
+        if self.status.plans < 3
+            || turn_rate_rad_s.abs() > self.cfg.grid.max_turn_rate_deg_s.to_radians()
+        {
             return None;
         }
-        let points: Vec<(f64, f64)> =
-            scan_in_robot_frame(scan, self.camera_forward_m, self.cfg.grid.scan_range_m)
-                .into_iter()
-                .filter(|&(_, within, _)| within)
-                .map(|(p, _, _)| p)
-                .collect();
+        let points: Vec<(f64, f64)> = self.grid.scan_hits_robot_frame(scan, self.camera_forward_m);
         let fix = scan_match::align(&self.grid, pose, &points, &self.cfg.scan_match)?;
         self.status.scan_fixes += 1;
         let g = self.cfg.scan_match.gain;
@@ -346,12 +350,14 @@ impl Explorer {
         self.replan_now = false;
         self.last_plan_ns = Some(input.now_ns);
         self.status.plans += 1;
-        let map = Costmap::build(&self.grid, self.cfg.costmap, self.half_width_m);
-        let start = self
-            .grid
-            .cell_of(pose.x_m, pose.y_m)
-            .and_then(|c| map.index(c));
-        let Some(start) = start else {
+        let Some(robot_cell) = self.grid.cell_of(pose.x_m, pose.y_m) else {
+            // Off the grid's edge ([nav.grid] extent_m): nothing can be planned.
+            self.plan = None;
+            self.status.done = true;
+            return None;
+        };
+        let map = Costmap::build(&self.grid, self.cfg.costmap, self.half_width_m, robot_cell);
+        let Some(start) = map.index(robot_cell) else {
             self.plan = None;
             return None;
         };

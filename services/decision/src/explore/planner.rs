@@ -3,7 +3,8 @@
 //! and the path to the chosen goal by following the parents back.
 //!
 //! A robot whose centre stands in a lethal cell (drift, or a wall seen late) may leave it
-//! through lethal cells, by the shortest way out; it may not enter one from a free cell.
+//! through lethal cells, each farther from the obstacle than the last; it may not enter one
+//! from a free cell.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -62,7 +63,12 @@ impl CostField {
             let escaping = map.is_lethal(cell);
             for (next, len) in map.neighbours(cell) {
                 let step = if map.is_lethal(next) {
-                    if !escaping || map.obstacle_distance_m(next) < 0.5 * cell_m {
+                    // Escaping means moving away from the obstacle: a lethal start may not
+                    // follow the lethal band along a wall.
+                    if !escaping
+                        || map.obstacle_distance_m(next) < 0.5 * cell_m
+                        || map.obstacle_distance_m(next) <= map.obstacle_distance_m(cell)
+                    {
                         continue;
                     }
                     len * (cell_m + ESCAPE_COST_M)
@@ -147,7 +153,8 @@ mod tests {
                 grid.insert(&pts);
             }
         }
-        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155);
+        let robot = grid.cell_of(0.5, 0.0).expect("inside");
+        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, robot);
         let idx = |x: f64, y: f64| {
             grid.cell_of(x, y)
                 .and_then(|c| map.index(c))

@@ -89,10 +89,16 @@ const ROTATE_STEP_RAD: f64 = 0.8;
 /// The pause after a rotation step, seconds.
 const ROTATE_PAUSE_S: f64 = 0.35;
 
+/// A behaviour that has not ended by odometry after this long ends anyway (odometry that
+/// does not advance, with no actuator reports, must not hold the robot in it), seconds.
+const BEHAVIOUR_LIMIT_S: f64 = 5.0;
+
 /// A running sequence of behaviours.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Recovery {
     steps: Vec<Behaviour>,
+    /// When the current step must end.
+    deadline_ns: Option<u64>,
 }
 
 /// Rotation steps of `total_rad`, each followed by a pause.
@@ -132,14 +138,20 @@ impl Recovery {
             until_ns: None,
         });
         steps.reverse();
-        Self { steps }
+        Self {
+            steps,
+            deadline_ns: None,
+        }
     }
 
     /// A look around: rotate in place by `degrees` counter-clockwise, pausing on the way.
     pub fn look_around(degrees: f64) -> Self {
         let mut steps = rotation(degrees.to_radians(), true);
         steps.reverse();
-        Self { steps }
+        Self {
+            steps,
+            deadline_ns: None,
+        }
     }
 
     /// The behaviour running now.
@@ -150,6 +162,11 @@ impl Recovery {
     /// The command for this frame, or `None` once the sequence is over.
     pub fn step(&mut self, input: &RecoveryInput) -> Option<MotionCommand> {
         while let Some(b) = self.steps.last_mut() {
+            let deadline = *self.deadline_ns.get_or_insert(
+                input
+                    .now_ns
+                    .saturating_add((BEHAVIOUR_LIMIT_S * 1e9) as u64),
+            );
             let command = match b {
                 Behaviour::BackUp {
                     distance_m,
@@ -183,10 +200,11 @@ impl Recovery {
                     (input.now_ns < until).then_some(MotionCommand::Stop)
                 }
             };
-            if command.is_some() {
+            if command.is_some() && input.now_ns < deadline {
                 return command;
             }
             self.steps.pop();
+            self.deadline_ns = None;
         }
         None
     }
@@ -250,5 +268,12 @@ mod tests {
         assert!(matches!(r.behaviour(), Some(Behaviour::Rotate { .. })));
         let mut look = Recovery::look_around(360.0);
         assert_eq!(look.step(&input), Some(MotionCommand::Left));
+        // Heading that never changes: each rotation step ends at its time limit.
+        let mut steps = 0;
+        while look.step(&input).is_some() {
+            input.now_ns += 100_000_000;
+            steps += 1;
+            assert!(steps < 1000, "the look-around never ended");
+        }
     }
 }

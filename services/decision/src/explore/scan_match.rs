@@ -125,11 +125,8 @@ mod tests {
             let pts = grid.scan_points(&pose, 0.2, &corner_scan());
             grid.insert(&pts);
         }
-        let points: Vec<(f64, f64)> =
-            super::super::grid::scan_in_robot_frame(&corner_scan(), 0.2, 3.0)
-                .into_iter()
-                .map(|(p, _, _)| p)
-                .collect();
+        let points = grid.scan_hits_robot_frame(&corner_scan(), 0.2);
+        assert!(points.len() > 40, "{}", points.len());
         // Dead reckoning says 0.1 m further ahead than the robot is.
         let drifted = DeadReckonedPose { x_m: 0.1, ..pose };
         let fix =

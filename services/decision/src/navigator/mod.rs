@@ -299,13 +299,11 @@ impl Navigator {
 
     /// Sets the exploring navigator's settings (`[nav]`; used by `policy = "explore"`).
     pub fn with_nav(mut self, nav: &NavConfig, robot: &RobotConfig, pulses: &PulseTable) -> Self {
-        if self.explorer.is_some() {
-            self.explorer = Some(Box::new(crate::explore::Explorer::new(
-                *nav,
-                robot,
-                pulses,
-                self.camera_forward_m,
-            )));
+        if let Some(old) = &self.explorer {
+            let first_bin = old.grid().first_bin();
+            let mut e = crate::explore::Explorer::new(*nav, robot, pulses, self.camera_forward_m);
+            e.set_first_bin(first_bin);
+            self.explorer = Some(Box::new(e));
         }
         self
     }
@@ -425,7 +423,8 @@ impl Navigator {
             }
         }
         if let Some(e) = self.explorer.as_mut()
-            && let Some(fix) = e.correction(&self.odometry.pose(), scan)
+            && let Some(fix) =
+                e.correction(&self.odometry.pose(), scan, self.odometry.turn_rate_rad_s())
         {
             self.odometry.correct_position(fix.dx_m, fix.dy_m);
             self.odometry.correct_heading(fix.dheading_rad);

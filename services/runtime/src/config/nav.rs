@@ -1,7 +1,10 @@
 //! `[nav]`: the exploring navigator (`decision.policy = "explore"`): every number it tunes, in
 //! one section with units, one sub-table per layer (Nav2's split: the map, the costmap, the
 //! frontiers, the planner, the controller, the recovery behaviours). The footprint is not
-//! here: it comes from `[robot]`, which the simulator's robot also uses.
+//! here: it comes from `[robot]`, which the simulator's robot also uses. The heading fix from
+//! the walls' directions that the fuzzy policy uses also corrects the explorer's pose; its
+//! gain stays `decision.heading_fix_gain` (with `decision.snap_turn_deg = 90`), one number
+//! for both.
 
 use serde::{Deserialize, Serialize};
 
@@ -133,8 +136,31 @@ impl Default for ScanMatchConfig {
     }
 }
 
+/// Most poses the scan matcher may try per scan (it runs every frame).
+const MAX_MATCH_POSES: f64 = 20_000.0;
+
 impl ScanMatchConfig {
     fn validate(&self) -> Result<(), Invalid> {
+        self.check_ranges()?;
+        let xy = 2.0 * (self.search_m / self.step_m).floor() + 1.0;
+        let th = 2.0 * (self.search_deg / self.step_deg).floor() + 1.0;
+        if xy * xy * th > MAX_MATCH_POSES {
+            return Err(Invalid::new(
+                "scan_match.search_m",
+                format!(
+                    "with step_m {}, search_deg {} and step_deg {} tries {} poses a scan, \
+                     more than {MAX_MATCH_POSES}",
+                    self.step_m,
+                    self.search_deg,
+                    self.step_deg,
+                    xy * xy * th
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn check_ranges(&self) -> Result<(), Invalid> {
         check_ranges(
             "scan_match",
             &[
@@ -325,7 +351,7 @@ impl ControllerConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RecoveryConfig {
-    /// The robot must get this much nearer its goal (or move this far) ...
+    /// The path cost to the goal must fall by this much ...
     pub progress_m: f64,
     /// ... within this many seconds, or the recovery behaviours start.
     pub progress_timeout_s: f64,
@@ -391,14 +417,33 @@ pub struct NavConfig {
 }
 
 impl NavConfig {
-    /// Checks every sub-table; the key of an error is below the section (`grid.cell_m`).
+    /// Checks every sub-table, then what spans them; the key of an error is below the
+    /// section (`grid.cell_m`).
     pub fn validate(&self) -> Result<(), Invalid> {
         self.grid.validate()?;
         self.scan_match.validate()?;
         self.costmap.validate()?;
         self.frontier.validate()?;
         self.controller.validate()?;
-        self.recovery.validate()
+        self.recovery.validate()?;
+        let f = &self.frontier;
+        if f.min_view_m > f.view_m {
+            return Err(Invalid::new(
+                "frontier.min_view_m",
+                format!("= {} must not exceed view_m ({})", f.min_view_m, f.view_m),
+            ));
+        }
+        if f.view_m > self.grid.scan_range_m {
+            return Err(Invalid::new(
+                "frontier.view_m",
+                format!(
+                    "= {} must not exceed grid.scan_range_m ({}): a frontier looked at from \
+                     farther is not seen",
+                    f.view_m, self.grid.scan_range_m
+                ),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -422,5 +467,18 @@ mod tests {
         c.grid.extent_m = 500.0;
         c.grid.cell_m = 0.02;
         assert_eq!(c.validate().map_err(|e| e.key), Err("grid.extent_m".into()));
+        let mut c = NavConfig::default();
+        c.scan_match.search_m = 1.0;
+        c.scan_match.step_m = 0.005;
+        assert_eq!(
+            c.validate().map_err(|e| e.key),
+            Err("scan_match.search_m".into())
+        );
+        let mut c = NavConfig::default();
+        c.frontier.view_m = 2.5;
+        assert_eq!(
+            c.validate().map_err(|e| e.key),
+            Err("frontier.view_m".into())
+        );
     }
 }
