@@ -189,7 +189,13 @@ pub struct Controller {
     cfg: ControllerConfig,
     footprint: FootprintCheck,
     mode: Mode,
+    /// Shifts (ahead or back) made in a row to clear the turning disc.
+    shifts: u32,
 }
+
+/// Shifts to clear the turning disc before turning anyway (a disc blocked both ways would
+/// otherwise rock the robot back and forth).
+const MAX_SHIFTS: u32 = 6;
 
 /// What the controller sees this frame.
 #[derive(Debug, Clone, Copy)]
@@ -211,6 +217,7 @@ impl Controller {
             cfg,
             footprint: FootprintCheck::of(robot, pulses),
             mode: Mode::Follow,
+            shifts: 0,
         }
     }
 
@@ -282,12 +289,9 @@ impl Controller {
         if error.abs() > self.cfg.turn_above_deg.to_radians() {
             let left = error > 0.0;
             match self.footprint.turn_blocked(grid, &pose, left) {
-                None => {
-                    self.mode = Mode::Turn { left };
-                    return out(turn_command(left), false);
-                }
-                // Something in the turning circle: move away from it first.
-                Some(ahead) => {
+                Some(ahead) if self.shifts < MAX_SHIFTS => {
+                    // Something in the turning disc: move away from it first.
+                    self.shifts += 1;
                     if ahead && self.footprint.behind_clear(grid, &pose, 0.1) {
                         return out(MotionCommand::Reverse, false);
                     }
@@ -298,6 +302,12 @@ impl Controller {
                         return out(MotionCommand::Forward, false);
                     }
                     // Boxed in: turn anyway, the shortest way.
+                    self.shifts = 0;
+                    self.mode = Mode::Turn { left };
+                    return out(turn_command(left), false);
+                }
+                _ => {
+                    self.shifts = 0;
                     self.mode = Mode::Turn { left };
                     return out(turn_command(left), false);
                 }

@@ -411,7 +411,6 @@ impl Explorer {
         let goal_m = centre(f.goal);
         let new_goal = previous.is_none_or(|g| (g.0 - goal_m.0).hypot(g.1 - goal_m.1) > 0.6);
         if new_goal {
-            self.progress.reset();
             self.recoveries_for_goal = 0;
         }
         let path: Vec<(f64, f64)> = field
@@ -425,10 +424,13 @@ impl Explorer {
             look_at_m: f.centroid_m,
             path,
         });
-        if self
-            .progress
-            .stalled(&self.cfg.recovery, f.distance_m, input.now_ns)
-        {
+        if self.progress.stalled(
+            &self.cfg.recovery,
+            f.distance_m,
+            new_goal,
+            (pose.x_m, pose.y_m),
+            input.now_ns,
+        ) {
             self.progress.reset();
             self.recoveries_for_goal += 1;
             if self.recoveries_for_goal > self.cfg.recovery.max_per_goal {

@@ -6,33 +6,46 @@
 use hvs_runtime::config::RecoveryConfig;
 use hvs_shared::messages::MotionCommand;
 
-/// Watches the path cost to the goal.
+/// Watches the robot's progress: the path cost to its goal falling, or the robot moving.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ProgressChecker {
-    /// Best path cost to the goal so far, and when it was last improved by `progress_m`.
-    anchor: Option<(f64, u64)>,
+    /// Path cost to the goal and position when progress was last made, and when.
+    anchor: Option<(f64, (f64, f64), u64)>,
 }
 
 impl ProgressChecker {
-    /// Starts watching afresh (new goal, or after a recovery).
+    /// Starts watching afresh (after a recovery).
     pub fn reset(&mut self) {
         self.anchor = None;
     }
 
-    /// Feeds the path cost to the goal at `now_ns`; true when progress has stalled.
-    pub fn stalled(&mut self, cfg: &RecoveryConfig, goal_cost_m: f64, now_ns: u64) -> bool {
+    /// Feeds the path cost to the goal and the robot's position at `now_ns`; true when
+    /// neither the cost fell by `progress_m` (a new goal only restarts the cost, not the
+    /// clock: a robot that keeps changing its goal without moving is stalled too) nor the
+    /// robot moved `progress_m` within `progress_timeout_s`.
+    pub fn stalled(
+        &mut self,
+        cfg: &RecoveryConfig,
+        goal_cost_m: f64,
+        new_goal: bool,
+        position_m: (f64, f64),
+        now_ns: u64,
+    ) -> bool {
         match self.anchor {
             None => {
-                self.anchor = Some((goal_cost_m, now_ns));
+                self.anchor = Some((goal_cost_m, position_m, now_ns));
                 false
             }
-            Some((best, since)) => {
-                if goal_cost_m <= best - cfg.progress_m {
-                    self.anchor = Some((goal_cost_m, now_ns));
-                    false
-                } else {
-                    now_ns.saturating_sub(since) as f64 * 1e-9 > cfg.progress_timeout_s
+            Some((best, at, since)) => {
+                let moved = (position_m.0 - at.0).hypot(position_m.1 - at.1);
+                if (!new_goal && goal_cost_m <= best - cfg.progress_m) || moved >= cfg.progress_m {
+                    self.anchor = Some((goal_cost_m, position_m, now_ns));
+                    return false;
                 }
+                if new_goal {
+                    self.anchor = Some((goal_cost_m, at, since));
+                }
+                now_ns.saturating_sub(since) as f64 * 1e-9 > cfg.progress_timeout_s
             }
         }
     }
@@ -219,14 +232,25 @@ mod tests {
         let cfg = RecoveryConfig::default();
         let mut p = ProgressChecker::default();
         let s = 1_000_000_000u64;
-        assert!(!p.stalled(&cfg, 5.0, 0));
-        assert!(!p.stalled(&cfg, 4.95, 3 * s));
-        assert!(p.stalled(&cfg, 4.95, 7 * s));
+        let here = (0.0, 0.0);
+        assert!(!p.stalled(&cfg, 5.0, true, here, 0));
+        assert!(!p.stalled(&cfg, 4.95, false, here, 3 * s));
+        assert!(p.stalled(&cfg, 4.95, false, here, 7 * s));
         p.reset();
-        assert!(!p.stalled(&cfg, 4.0, 8 * s));
-        assert!(!p.stalled(&cfg, 3.0, 13 * s));
-        assert!(!p.stalled(&cfg, 3.0, 18 * s));
-        assert!(p.stalled(&cfg, 3.0, 20 * s));
+        assert!(!p.stalled(&cfg, 4.0, true, here, 8 * s));
+        assert!(!p.stalled(&cfg, 3.0, false, here, 13 * s));
+        assert!(!p.stalled(&cfg, 3.0, false, here, 18 * s));
+        assert!(p.stalled(&cfg, 3.0, false, here, 20 * s));
+        // Changing goals without moving does not count as progress.
+        p.reset();
+        assert!(!p.stalled(&cfg, 3.0, true, here, 30 * s));
+        assert!(!p.stalled(&cfg, 1.0, true, here, 33 * s));
+        assert!(p.stalled(&cfg, 0.5, true, here, 37 * s));
+        // Moving does.
+        p.reset();
+        assert!(!p.stalled(&cfg, 3.0, true, here, 40 * s));
+        assert!(!p.stalled(&cfg, 3.0, false, (0.5, 0.0), 45 * s));
+        assert!(!p.stalled(&cfg, 3.0, false, (0.5, 0.0), 50 * s));
     }
 
     #[test]

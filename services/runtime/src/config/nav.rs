@@ -351,7 +351,7 @@ impl ControllerConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RecoveryConfig {
-    /// The path cost to the goal must fall by this much ...
+    /// The path cost to the goal must fall by this much, or the robot move this far, ...
     pub progress_m: f64,
     /// ... within this many seconds, or the recovery behaviours start.
     pub progress_timeout_s: f64,
