@@ -9,7 +9,8 @@
 use hvs_runtime::config::{ControllerConfig, PulsePair, PulseTable, RobotConfig};
 use hvs_shared::messages::MotionCommand;
 
-use super::grid::{Occupancy, OccupancyGrid, to_grid_frame};
+use super::grid::{OccupancyGrid, to_grid_frame};
+use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 
 /// Side margin of the swept rectangle beyond the footprint, metres.
@@ -88,9 +89,9 @@ impl FootprintCheck {
             while l <= left.1 + 1e-9 {
                 let (x, y) = to_grid_frame(pose, (a, l));
                 match grid.state_at(x, y) {
-                    Occupancy::Occupied => occupied += 1,
-                    Occupancy::Unknown => unknown += 1,
-                    Occupancy::Free => {}
+                    CellState::Occupied => occupied += 1,
+                    CellState::Unknown => unknown += 1,
+                    CellState::Free => {}
                 }
                 all += 1;
                 l += step;
@@ -152,7 +153,7 @@ impl FootprintCheck {
                     continue;
                 }
                 let (x, y) = to_grid_frame(pose, p);
-                if grid.state_at(x, y) == Occupancy::Occupied
+                if grid.state_at(x, y) == CellState::Occupied
                     && nearest.is_none_or(|(nd, _)| d < nd)
                 {
                     nearest = Some((d, p.0));
@@ -288,30 +289,26 @@ impl Controller {
         }
         if error.abs() > self.cfg.turn_above_deg.to_radians() {
             let left = error > 0.0;
-            match self.footprint.turn_blocked(grid, &pose, left) {
-                Some(ahead) if self.shifts < MAX_SHIFTS => {
-                    // Something in the turning disc: move away from it first.
+            if let Some(ahead) = self.footprint.turn_blocked(grid, &pose, left)
+                && self.shifts < MAX_SHIFTS
+            {
+                // Something in the turning disc: move away from it first.
+                if ahead && self.footprint.behind_clear(grid, &pose, 0.1) {
                     self.shifts += 1;
-                    if ahead && self.footprint.behind_clear(grid, &pose, 0.1) {
-                        return out(MotionCommand::Reverse, false);
-                    }
-                    if !ahead
-                        && self.footprint.ahead_clear(grid, &pose, 0.1)
-                        && self.front_open(input.front_m)
-                    {
-                        return out(MotionCommand::Forward, false);
-                    }
-                    // Boxed in: turn anyway, the shortest way.
-                    self.shifts = 0;
-                    self.mode = Mode::Turn { left };
-                    return out(turn_command(left), false);
+                    return out(MotionCommand::Reverse, false);
                 }
-                _ => {
-                    self.shifts = 0;
-                    self.mode = Mode::Turn { left };
-                    return out(turn_command(left), false);
+                if !ahead
+                    && self.footprint.ahead_clear(grid, &pose, 0.1)
+                    && self.front_open(input.front_m)
+                {
+                    self.shifts += 1;
+                    return out(MotionCommand::Forward, false);
                 }
+                // Boxed in: turn anyway, the shortest way.
             }
+            self.shifts = 0;
+            self.mode = Mode::Turn { left };
+            return out(turn_command(left), false);
         }
         if self
             .footprint

@@ -8,7 +8,8 @@
 
 use hvs_runtime::config::CostmapConfig;
 
-use super::grid::{CellIndex, Occupancy, OccupancyGrid};
+use super::grid::{CellIndex, OccupancyGrid};
+use crate::local_map::CellState;
 
 /// Unknown cells kept around the seen area, cells.
 const MARGIN_CELLS: usize = 4;
@@ -24,7 +25,7 @@ pub struct Costmap {
     /// Distance to the nearest occupied cell, metres (capped).
     dist_m: Vec<f32>,
     /// Per-cell state.
-    state: Vec<Occupancy>,
+    state: Vec<CellState>,
     lethal_m: f64,
     cfg: CostmapConfig,
     cell_m: f64,
@@ -61,7 +62,7 @@ impl Costmap {
         const FAR: u32 = u32::MAX / 2;
         let mut d: Vec<u32> = state
             .iter()
-            .map(|&s| if s == Occupancy::Occupied { 0 } else { FAR })
+            .map(|&s| if s == CellState::Occupied { 0 } else { FAR })
             .collect();
         for r in 0..rows {
             for c in 0..cols {
@@ -158,7 +159,7 @@ impl Costmap {
     }
 
     /// The occupancy state of a window cell.
-    pub fn state(&self, i: usize) -> Occupancy {
+    pub fn state(&self, i: usize) -> CellState {
         self.state[i]
     }
 
@@ -178,7 +179,7 @@ impl Costmap {
         } else {
             0.0
         };
-        let unknown = if self.state[i] == Occupancy::Unknown {
+        let unknown = if self.state[i] == CellState::Unknown {
             self.cfg.unknown_cost_m
         } else {
             0.0

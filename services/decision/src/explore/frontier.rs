@@ -7,8 +7,8 @@ use std::collections::VecDeque;
 use hvs_runtime::config::FrontierConfig;
 
 use super::costmap::Costmap;
-use super::grid::Occupancy;
 use super::planner::CostField;
+use crate::local_map::CellState;
 
 /// One frontier cluster.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,7 +25,7 @@ pub struct Frontier {
 
 /// Whether a window cell is a frontier cell: free, with an unknown 4-neighbour.
 fn is_frontier(map: &Costmap, i: usize) -> bool {
-    if map.state(i) != Occupancy::Free {
+    if map.state(i) != CellState::Free {
         return false;
     }
     let (_, cols, rows) = map.window();
@@ -46,7 +46,7 @@ fn is_frontier(map: &Costmap, i: usize) -> bool {
     around
         .into_iter()
         .flatten()
-        .any(|j| map.state(j) == Occupancy::Unknown)
+        .any(|j| map.state(j) == CellState::Unknown)
 }
 
 /// Every frontier cluster with a reachable cell; `centre` maps a window index to metres.

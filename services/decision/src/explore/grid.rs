@@ -9,6 +9,7 @@
 use hvs_runtime::config::GridConfig;
 use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
 
+use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 
 /// A ray stops marking free this share of its length before its point (a ray that meets a
@@ -19,17 +20,6 @@ const FREE_MARGIN: f64 = 0.1;
 const SUPPORT_REL: f64 = 0.1;
 /// ... plus this, metres.
 const SUPPORT_M: f64 = 0.05;
-
-/// What the grid knows about a cell.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Occupancy {
-    /// Never seen, or seen both ways.
-    Unknown,
-    /// Scan rays passed through it.
-    Free,
-    /// Scan points fell in it.
-    Occupied,
-}
 
 /// A cell index: column (x) and row (y).
 pub type CellIndex = (usize, usize);
@@ -125,21 +115,21 @@ impl OccupancyGrid {
     }
 
     /// A cell's state.
-    pub fn state(&self, cell: CellIndex) -> Occupancy {
+    pub fn state(&self, cell: CellIndex) -> CellState {
         let l = f64::from(self.log_odds(cell));
         if l > self.cfg.decided_log_odds {
-            Occupancy::Occupied
+            CellState::Occupied
         } else if l < -self.cfg.decided_log_odds {
-            Occupancy::Free
+            CellState::Free
         } else {
-            Occupancy::Unknown
+            CellState::Unknown
         }
     }
 
     /// The state of the cell holding a point (outside the grid: unknown).
-    pub fn state_at(&self, x_m: f64, y_m: f64) -> Occupancy {
+    pub fn state_at(&self, x_m: f64, y_m: f64) -> CellState {
         self.cell_of(x_m, y_m)
-            .map_or(Occupancy::Unknown, |cell| self.state(cell))
+            .map_or(CellState::Unknown, |cell| self.state(cell))
     }
 
     fn update(&mut self, (c, r): CellIndex, delta: f64) {
@@ -299,9 +289,9 @@ impl OccupancyGrid {
                     None => ' ',
                     Some(_) if dc == 0 && dr == 0 => 'R',
                     Some(cell) => match self.state(cell) {
-                        Occupancy::Occupied => '#',
-                        Occupancy::Free => '.',
-                        Occupancy::Unknown => ' ',
+                        CellState::Occupied => '#',
+                        CellState::Free => '.',
+                        CellState::Unknown => ' ',
                     },
                 };
                 out.push(ch);
@@ -335,10 +325,10 @@ mod tests {
             let pts = grid.scan_points(&pose, 0.2, &wall_scan(1.5));
             grid.insert(&pts);
         }
-        assert_eq!(grid.state_at(1.75, 0.0), Occupancy::Occupied);
-        assert_eq!(grid.state_at(1.0, 0.0), Occupancy::Free);
-        assert_eq!(grid.state_at(2.5, 0.0), Occupancy::Unknown);
-        assert_eq!(grid.state_at(1.0, 2.0), Occupancy::Unknown);
+        assert_eq!(grid.state_at(1.75, 0.0), CellState::Occupied);
+        assert_eq!(grid.state_at(1.0, 0.0), CellState::Free);
+        assert_eq!(grid.state_at(2.5, 0.0), CellState::Unknown);
+        assert_eq!(grid.state_at(1.0, 2.0), CellState::Unknown);
         // Turned left by 90 degrees, the same scan lands north.
         let turned = DeadReckonedPose {
             heading_rad: std::f64::consts::FRAC_PI_2,
@@ -348,7 +338,7 @@ mod tests {
             let pts = grid.scan_points(&turned, 0.2, &wall_scan(1.5));
             grid.insert(&pts);
         }
-        assert_eq!(grid.state_at(0.0, 1.75), Occupancy::Occupied);
+        assert_eq!(grid.state_at(0.0, 1.75), CellState::Occupied);
     }
 
     #[test]
@@ -358,8 +348,8 @@ mod tests {
             let pts = grid.scan_points(&DeadReckonedPose::default(), 0.2, &wall_scan(5.0));
             grid.insert(&pts);
         }
-        assert_eq!(grid.state_at(1.8, 0.0), Occupancy::Free);
-        assert_eq!(grid.state_at(3.0, 0.0), Occupancy::Unknown);
-        assert_eq!(grid.state_at(5.2, 0.0), Occupancy::Unknown);
+        assert_eq!(grid.state_at(1.8, 0.0), CellState::Free);
+        assert_eq!(grid.state_at(3.0, 0.0), CellState::Unknown);
+        assert_eq!(grid.state_at(5.2, 0.0), CellState::Unknown);
     }
 }

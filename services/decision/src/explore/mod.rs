@@ -30,11 +30,12 @@ pub mod scan_match;
 use hvs_runtime::config::{NavConfig, PulseTable, RobotConfig};
 use hvs_shared::messages::{IntersectionType, MotionCommand, ObstacleScan, SCAN_BINS};
 
+use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 use controller::{ControlInput, Controller, wrap_rad};
 use costmap::Costmap;
 use frontier::{Blacklist, choose, find_frontiers};
-use grid::{CellIndex, OccupancyGrid};
+use grid::OccupancyGrid;
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
 pub use scan_match::PoseCorrection;
@@ -164,7 +165,10 @@ impl Explorer {
 
     /// Counters.
     pub fn status(&self) -> ExploreStatus {
-        self.status
+        ExploreStatus {
+            blacklisted: self.blacklist.len(),
+            ..self.status
+        }
     }
 
     /// The goal being driven to, grid frame, metres.
@@ -187,9 +191,7 @@ impl Explorer {
     ) -> Option<PoseCorrection> {
         // Early scans would be aligned to themselves; a scan taken while turning fast is
         // placed by a heading that leads the camera's, and is not added to the grid either.
-        if self.status.plans < 3
-            || turn_rate_rad_s.abs() > self.cfg.grid.max_turn_rate_deg_s.to_radians()
-        {
+        if self.status.plans < 3 || !self.scan_placeable(turn_rate_rad_s) {
             return None;
         }
         let points: Vec<(f64, f64)> = self.grid.scan_hits_robot_frame(scan, self.camera_forward_m);
@@ -204,6 +206,13 @@ impl Explorer {
         })
     }
 
+    /// Whether a scan taken at this turn rate can be placed on the grid: while turning fast
+    /// the dead-reckoned heading leads or lags the camera's (command latency), and the scan
+    /// would smear the walls (it is neither added nor aligned).
+    fn scan_placeable(&self, turn_rate_rad_s: f64) -> bool {
+        turn_rate_rad_s.abs() <= self.cfg.grid.max_turn_rate_deg_s.to_radians()
+    }
+
     /// One frame: adds the scan to the grid and returns the motion and its PSC ramp.
     pub fn step(&mut self, input: ExploreInput<'_>) -> (MotionCommand, u32) {
         let command = self.motion(input);
@@ -216,11 +225,7 @@ impl Explorer {
 
     fn motion(&mut self, input: ExploreInput<'_>) -> MotionCommand {
         let pose = input.pose;
-        // A scan taken while turning fast is placed by a heading that leads or lags the
-        // camera's (command latency): it would smear the walls.
-        if input.scan.valid_bins() > 0
-            && input.turn_rate_rad_s.abs() <= self.cfg.grid.max_turn_rate_deg_s.to_radians()
-        {
+        if input.scan.valid_bins() > 0 && self.scan_placeable(input.turn_rate_rad_s) {
             let pts = self
                 .grid
                 .scan_points(&pose, self.camera_forward_m, input.scan);
@@ -309,7 +314,6 @@ impl Explorer {
     /// resolved it, it is gone anyway).
     fn seen(&mut self, p: (f64, f64)) {
         self.blacklist.add(p);
-        self.status.blacklisted = self.blacklist.len();
         self.plan = None;
         self.replan_now = true;
         self.controller.reset();
@@ -325,7 +329,7 @@ impl Explorer {
             let t = i as f64 * step / d.max(1e-9);
             self.grid
                 .state_at(cam.0 + t * (p.0 - cam.0), cam.1 + t * (p.1 - cam.1))
-                != grid::Occupancy::Occupied
+                != CellState::Occupied
         })
     }
 
@@ -396,7 +400,6 @@ impl Explorer {
             if since >= RETRY_S {
                 self.last_retry_ns = Some(input.now_ns);
                 self.blacklist.clear();
-                self.status.blacklisted = 0;
                 self.replan_now = true;
                 if self.cfg.recovery.rotate_deg > 0.0 {
                     let mut r = Recovery::look_around(self.cfg.recovery.rotate_deg);
@@ -435,7 +438,6 @@ impl Explorer {
             self.recoveries_for_goal += 1;
             if self.recoveries_for_goal > self.cfg.recovery.max_per_goal {
                 self.blacklist.add(f.centroid_m);
-                self.status.blacklisted = self.blacklist.len();
                 self.plan = None;
                 self.replan_now = true;
                 self.recoveries_for_goal = 0;
@@ -449,10 +451,5 @@ impl Explorer {
             return cmd;
         }
         None
-    }
-
-    /// The cell of a point, for tests and traces.
-    pub fn cell_of(&self, x_m: f64, y_m: f64) -> Option<CellIndex> {
-        self.grid.cell_of(x_m, y_m)
     }
 }

@@ -5,7 +5,8 @@
 
 use hvs_runtime::config::ScanMatchConfig;
 
-use super::grid::{Occupancy, OccupancyGrid, to_grid_frame};
+use super::grid::{OccupancyGrid, to_grid_frame};
+use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 
 /// Share by which the best pose's score must beat the dead-reckoned pose's.
@@ -34,7 +35,7 @@ fn score(grid: &OccupancyGrid, pose: &DeadReckonedPose, points: &[(f64, f64)]) -
             if l > 0.0 {
                 s += l;
             }
-            if grid.state(cell) == Occupancy::Occupied {
+            if grid.state(cell) == CellState::Occupied {
                 on += 1;
             }
         }
