@@ -41,6 +41,10 @@ pub fn run(config_path: &Path, opts: &DriveOptions, json: bool) -> Result<()> {
         if r.motion_noise { "on" } else { "off" },
         r.seed
     );
+    println!(
+        "decision time (wall clock, this machine): median {:.0} us, p99 {:.0} us, largest {:.0} us",
+        r.decision_us.0, r.decision_us.1, r.decision_us.2
+    );
     println!("intersections: {:?}", r.intersections);
     println!("commands sent: {:?}", r.commands);
     Ok(())

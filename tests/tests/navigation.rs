@@ -139,6 +139,64 @@ fn the_maze_is_driven_for_five_minutes_with_and_without_the_visit_memory() {
     }
 }
 
+/// Drives with `config/sim.toml` switched to the exploring navigator, the simulated wheels
+/// slipping (the realistic preset: dead reckoning drifts).
+fn explore_with(opts: DriveOptions) -> Value {
+    let mut config =
+        HvsConfig::load(&repo_root().join("config/sim.toml")).expect("config/sim.toml");
+    config.decision.policy = hvs_runtime::config::DecisionPolicy::Explore;
+    let opts = DriveOptions {
+        motion_noise: Some(hvs_sim::SimMotionNoise::realistic()),
+        ..opts
+    };
+    let report = run_drive(&config, &opts).unwrap_or_else(|e| panic!("explore drive: {e}"));
+    serde_json::to_value(report).expect("report as JSON")
+}
+
+#[test]
+fn the_explorer_leaves_its_start_and_uncovers_the_maze_with_slipping_wheels() {
+    // Two simulated minutes each (about 20 s of wall time in release), both side by side:
+    // the maze from its start pose, and a generated maze no number was tuned on. The
+    // explorer must not stand and look: it drives away from its start, and the camera sees
+    // a good share of the reachable floor (the start view alone is under 10 %). Collisions
+    // are counted, not asserted (docs/navigation.md has the tables: it still touches walls
+    // in some runs).
+    let runs: Vec<(&str, Value)> = std::thread::scope(|s| {
+        let maze = s.spawn(|| {
+            explore_with(DriveOptions {
+                map: Some(repo_root().join("config/maps/maze.txt")),
+                duration_s: 120.0,
+                ..DriveOptions::default()
+            })
+        });
+        let generated = s.spawn(|| {
+            explore_with(DriveOptions {
+                duration_s: 120.0,
+                maze: Some(hvs_sim::MazeOptions {
+                    seed: 11,
+                    ..hvs_sim::MazeOptions::default()
+                }),
+                ..DriveOptions::default()
+            })
+        });
+        vec![
+            ("maze.txt", maze.join().expect("drive thread")),
+            ("generated maze 11", generated.join().expect("drive thread")),
+        ]
+    });
+    for (name, r) in &runs {
+        let coverage = r["coverage_pct"].as_f64().expect("coverage_pct");
+        let distance = r["distance_m"].as_f64().expect("distance_m");
+        eprintln!(
+            "explore, {name}: collisions {} coverage {coverage:.1} % distance {distance:.1} m",
+            r["collisions"]
+        );
+        assert_eq!(r["motion_noise"], true, "{name}: {r}");
+        assert!(distance > 10.0, "{name}: {r}");
+        assert!(coverage > 20.0, "{name}: {r}");
+    }
+}
+
 #[test]
 fn bad_drive_arguments_fail_with_a_message() {
     let out = hvs(&[

@@ -37,6 +37,29 @@ pub struct FootprintCheck {
     pivot_left_m: (f64, f64),
 }
 
+/// The cells a motion would sweep, by state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SweptArea {
+    /// Samples on occupied cells.
+    pub occupied: usize,
+    /// Share of the samples on unknown cells (0..1).
+    pub unknown_share: f64,
+}
+
+impl SweptArea {
+    fn of((occupied, unknown, all): (usize, usize, usize)) -> Self {
+        Self {
+            occupied,
+            unknown_share: unknown as f64 / all.max(1) as f64,
+        }
+    }
+
+    /// No occupied cell and mostly cells seen free.
+    pub fn seen_clear(&self) -> bool {
+        self.occupied == 0 && self.unknown_share <= MAX_UNKNOWN_AHEAD
+    }
+}
+
 /// Body speed and turn rate for a pulse pair, from the wheel model the dead reckoning uses.
 fn body_motion(robot: &RobotConfig, pulses: &PulseTable, pair: PulsePair) -> (f64, f64) {
     let wheel = |pw: u16, neutral: u16, forward: u16| {
@@ -65,6 +88,11 @@ impl FootprintCheck {
             turn_radius_m: robot.half_diagonal_m(),
             pivot_left_m: (pivot(pulses.left), pivot(pulses.right)),
         }
+    }
+
+    /// Half the footprint's length, metres.
+    pub fn half_length_m(&self) -> f64 {
+        self.half_length_m
     }
 
     /// Half the footprint's width, metres.
@@ -101,31 +129,41 @@ impl FootprintCheck {
         (occupied, unknown, all)
     }
 
-    /// Whether driving `ahead_m` forward sweeps no occupied cell and mostly cells seen free:
-    /// the camera is blind closer than the matcher's shortest range, so a wall right ahead
-    /// shows as unknown, not as occupied.
-    pub fn ahead_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, ahead_m: f64) -> bool {
+    /// What driving `ahead_m` forward would sweep: the camera is blind closer than the
+    /// matcher's shortest range and sees only its field of view, so right after a turn the
+    /// cells beside the way ahead are often unknown rather than seen free.
+    pub fn ahead_swept(
+        &self,
+        grid: &OccupancyGrid,
+        pose: &DeadReckonedPose,
+        ahead_m: f64,
+    ) -> SweptArea {
         let w = self.half_width_m + SWEEP_MARGIN_M;
-        let (occupied, unknown, all) = self.rect_count(
+        SweptArea::of(self.rect_count(
             grid,
             pose,
             (self.half_length_m, self.half_length_m + ahead_m),
             (-w, w),
-        );
-        occupied == 0 && (unknown as f64) <= MAX_UNKNOWN_AHEAD * all as f64
+        ))
     }
 
-    /// Whether backing up `back_m` sweeps no occupied cell (the camera never sees behind;
-    /// the robot came that way).
+    /// Whether driving `ahead_m` forward sweeps no occupied cell and mostly cells seen free.
+    pub fn ahead_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, ahead_m: f64) -> bool {
+        self.ahead_swept(grid, pose, ahead_m).seen_clear()
+    }
+
+    /// Whether backing up `back_m` sweeps no occupied cell and mostly cells seen free (the
+    /// camera never sees behind: what is known there is the way the robot came, which the
+    /// grid clears under its footprint, and walls seen before the robot turned).
     pub fn behind_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, back_m: f64) -> bool {
         let w = self.half_width_m + SWEEP_MARGIN_M;
-        self.rect_count(
+        SweptArea::of(self.rect_count(
             grid,
             pose,
             (-self.half_length_m - back_m, -self.half_length_m),
             (-w, w),
-        )
-        .0 == 0
+        ))
+        .seen_clear()
     }
 
     /// Whether the disc the footprint sweeps turning (`left` or right) holds an occupied
@@ -297,10 +335,7 @@ impl Controller {
                     self.shifts += 1;
                     return out(MotionCommand::Reverse, false);
                 }
-                if !ahead
-                    && self.footprint.ahead_clear(grid, &pose, 0.1)
-                    && self.front_open(input.front_m)
-                {
+                if !ahead && self.may_drive_ahead(grid, &pose, 0.1, input.front_m) {
                     self.shifts += 1;
                     return out(MotionCommand::Forward, false);
                 }
@@ -310,15 +345,29 @@ impl Controller {
             self.mode = Mode::Turn { left };
             return out(turn_command(left), false);
         }
-        if self
-            .footprint
-            .ahead_clear(grid, &pose, self.cfg.check_ahead_m)
-            && self.front_open(input.front_m)
-        {
+        if self.may_drive_ahead(grid, &pose, self.cfg.check_ahead_m, input.front_m) {
             out(MotionCommand::Forward, false)
         } else {
             out(MotionCommand::Stop, true)
         }
+    }
+
+    /// Driving `ahead_m` forward sweeps no occupied cell, and either mostly cells seen free
+    /// or the middle window sees nothing within `stop_range_m` plus that distance (then any
+    /// share may be unknown: after a turn the sides of the way lie in the camera's blind
+    /// zone, and only the middle of the way is vouched for by the window).
+    fn may_drive_ahead(
+        &self,
+        grid: &OccupancyGrid,
+        pose: &DeadReckonedPose,
+        ahead_m: f64,
+        front_m: Option<f64>,
+    ) -> bool {
+        let swept = self.footprint.ahead_swept(grid, pose, ahead_m);
+        if swept.occupied > 0 || !self.front_open(front_m) {
+            return false;
+        }
+        swept.seen_clear() || front_m.is_some_and(|m| m >= self.cfg.stop_range_m + ahead_m)
     }
 
     fn front_open(&self, front_m: Option<f64>) -> bool {
@@ -337,7 +386,9 @@ fn turn_command(left: bool) -> MotionCommand {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::explore::grid::ScanPoints;
     use hvs_runtime::config::GridConfig;
+    use hvs_shared::messages::ObstacleScan;
 
     /// A grid seen free for 3 m all round the origin.
     fn open_grid() -> OccupancyGrid {
@@ -360,6 +411,15 @@ mod tests {
         grid
     }
 
+    /// The controller for the default robot and pulse table.
+    fn default_controller() -> Controller {
+        Controller::new(
+            ControllerConfig::default(),
+            &RobotConfig::default(),
+            &PulseTable::default(),
+        )
+    }
+
     fn input(pose: DeadReckonedPose, path: &[(f64, f64)]) -> ControlInput<'_> {
         ControlInput {
             pose,
@@ -372,11 +432,7 @@ mod tests {
     #[test]
     fn drives_ahead_along_a_straight_path_and_turns_toward_a_side_one() {
         let grid = open_grid();
-        let mut c = Controller::new(
-            ControllerConfig::default(),
-            &RobotConfig::default(),
-            &PulseTable::default(),
-        );
+        let mut c = default_controller();
         // Nothing seen ahead: no driving into it.
         let unseen = OccupancyGrid::new(GridConfig::default());
         let ahead = [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0)];
@@ -407,11 +463,7 @@ mod tests {
             MotionCommand::Forward
         );
         let right = [(0.0, 0.0), (0.0, -1.0)];
-        let mut c = Controller::new(
-            ControllerConfig::default(),
-            &RobotConfig::default(),
-            &PulseTable::default(),
-        );
+        let mut c = default_controller();
         assert_eq!(
             c.step(&grid, input(DeadReckonedPose::default(), &right))
                 .command,
@@ -420,13 +472,42 @@ mod tests {
     }
 
     #[test]
+    fn unknown_sides_ahead_need_a_far_front_range_and_walls_always_block() {
+        // Only a narrow strip ahead seen free: the sides of the swept footprint are unknown
+        // (the camera's blind zone right after a turn).
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        let narrow = ObstacleScan {
+            tan_half_fov: 0.05,
+            range_m: [3.0; hvs_shared::messages::SCAN_BINS],
+            ..Default::default()
+        };
+        for _ in 0..3 {
+            let pts = grid.scan_points(&DeadReckonedPose::default(), 0.0, &narrow);
+            grid.insert(&pts);
+        }
+        let mut c = default_controller();
+        let ahead = [(0.0, 0.0), (2.0, 0.0)];
+        let mut i = input(DeadReckonedPose::default(), &ahead);
+        // Nothing seen by the middle window: not enough.
+        assert_eq!(c.step(&grid, i).command, MotionCommand::Stop);
+        // The middle window sees 2 m: drive.
+        i.front_m = Some(2.0);
+        assert_eq!(c.step(&grid, i).command, MotionCommand::Forward);
+        // A wall in the swept footprint blocks whatever the window says.
+        for _ in 0..6 {
+            grid.insert(&ScanPoints {
+                camera: (0.0, 0.0),
+                hits: vec![(0.3, 0.1)],
+                rays: vec![],
+            });
+        }
+        assert_eq!(c.step(&grid, i).command, MotionCommand::Stop);
+    }
+
+    #[test]
     fn a_near_front_range_blocks_driving_ahead() {
         let grid = open_grid();
-        let mut c = Controller::new(
-            ControllerConfig::default(),
-            &RobotConfig::default(),
-            &PulseTable::default(),
-        );
+        let mut c = default_controller();
         let ahead = [(0.0, 0.0), (2.0, 0.0)];
         let mut i = input(DeadReckonedPose::default(), &ahead);
         i.front_m = Some(0.2);

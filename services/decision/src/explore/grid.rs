@@ -265,6 +265,50 @@ impl OccupancyGrid {
         }
     }
 
+    /// Marks the cells under the robot's footprint free (Nav2's footprint clearing): the
+    /// robot stands there, and the camera, which looks ahead only, never sees them. The way
+    /// the robot came stays known free for backing up. Cells already occupied are left as
+    /// they are: the footprint's samples reach into cells only partly under the robot, and
+    /// with a drifting pose a wall beside it (or a bump) must not be wiped.
+    pub fn clear_footprint(
+        &mut self,
+        pose: &DeadReckonedPose,
+        half_length_m: f64,
+        half_width_m: f64,
+    ) {
+        let step = 0.5 * self.cfg.cell_m;
+        let mut a = -half_length_m;
+        while a <= half_length_m + 1e-9 {
+            let mut l = -half_width_m;
+            while l <= half_width_m + 1e-9 {
+                let (x, y) = to_grid_frame(pose, (a, l));
+                if let Some(cell) = self.cell_of(x, y) {
+                    let now = f64::from(self.log_odds(cell));
+                    if now <= self.cfg.decided_log_odds {
+                        self.update(cell, self.cfg.min_log_odds - now);
+                    }
+                }
+                l += step;
+            }
+            a += step;
+        }
+    }
+
+    /// Marks a robot-frame segment from `(ahead_m, left0_m)` to `(ahead_m, left1_m)` occupied
+    /// (a bump: the robot was stopped there by something the camera never saw).
+    pub fn mark_bump(&mut self, pose: &DeadReckonedPose, ahead_m: f64, left_m: (f64, f64)) {
+        let step = 0.5 * self.cfg.cell_m;
+        let mut l = left_m.0;
+        while l <= left_m.1 + 1e-9 {
+            let (x, y) = to_grid_frame(pose, (ahead_m, l));
+            if let Some(cell) = self.cell_of(x, y) {
+                let now = f64::from(self.log_odds(cell));
+                self.update(cell, self.cfg.max_log_odds - now);
+            }
+            l += step;
+        }
+    }
+
     /// Whether a cell index is inside the grid after an offset.
     pub fn offset(&self, (c, r): CellIndex, dc: i64, dr: i64) -> Option<CellIndex> {
         let (c, r) = (c as i64 + dc, r as i64 + dr);
@@ -351,5 +395,32 @@ mod tests {
         assert_eq!(grid.state_at(1.8, 0.0), CellState::Free);
         assert_eq!(grid.state_at(3.0, 0.0), CellState::Unknown);
         assert_eq!(grid.state_at(5.2, 0.0), CellState::Unknown);
+    }
+
+    #[test]
+    fn the_robots_footprint_is_cleared_of_unknown_cells_and_nothing_beside_it() {
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        // A stray wall under the robot (a wrong match), another 0.5 m to its left.
+        let pose = DeadReckonedPose::default();
+        for _ in 0..6 {
+            for p in [(0.05, 0.0), (0.05, 0.5)] {
+                let pts = ScanPoints {
+                    camera: (-1.0, p.1),
+                    hits: vec![p],
+                    rays: vec![],
+                };
+                grid.insert(&pts);
+            }
+        }
+        assert_eq!(grid.state_at(0.05, 0.0), CellState::Occupied);
+        assert_eq!(grid.state_at(0.05, 0.5), CellState::Occupied);
+        assert_eq!(grid.state_at(-0.2, 0.0), CellState::Unknown);
+        grid.clear_footprint(&pose, 0.22, 0.15);
+        // Unknown under the robot: free now. A wall under it stays (a drifting pose must not
+        // wipe walls beside the robot).
+        assert_eq!(grid.state_at(-0.2, 0.0), CellState::Free);
+        assert_eq!(grid.state_at(0.05, 0.0), CellState::Occupied);
+        assert_eq!(grid.state_at(0.05, 0.5), CellState::Occupied);
+        assert_eq!(grid.state_at(0.4, 0.0), CellState::Unknown);
     }
 }

@@ -26,6 +26,7 @@ pub mod grid;
 pub mod planner;
 pub mod recovery;
 pub mod scan_match;
+pub mod stall;
 
 use hvs_runtime::config::{NavConfig, PulseTable, RobotConfig};
 use hvs_shared::messages::{IntersectionType, MotionCommand, ObstacleScan, SCAN_BINS};
@@ -39,9 +40,15 @@ use grid::OccupancyGrid;
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
 pub use scan_match::PoseCorrection;
+use stall::StallCheck;
 
 /// Extra cost of a frontier whose centre lies in the camera's blind zone, metres.
 const BLIND_FRONTIER_COST_M: f64 = 2.0;
+/// A scan with fewer valid bins than this, and no front range, is blind.
+const BLIND_SCAN_BINS: usize = 4;
+/// A bump is marked this far beyond the footprint's edge, metres (the footprint clearing
+/// leaves occupied cells alone, so the bump stays).
+const BUMP_GAP_M: f64 = 0.12;
 /// Seconds between retries once no frontier is left.
 const RETRY_S: f64 = 20.0;
 
@@ -67,6 +74,8 @@ pub struct ExploreStatus {
     pub recoveries: u64,
     /// Scans that corrected the pose.
     pub scan_fixes: u64,
+    /// Stalls found (the picture unchanged while dead reckoning moved).
+    pub stalls: u64,
     /// No reachable frontier is left.
     pub done: bool,
 }
@@ -90,6 +99,44 @@ pub struct ExploreInput<'a> {
     pub now_ns: u64,
 }
 
+/// Turning more than this since the front was last seen makes that range stale, radians.
+const FRONT_MEMORY_TURN_RAD: f64 = 0.26;
+
+/// The last range the middle window read, and the pose it was read from: a wall the robot
+/// drives up to leaves the matcher's range (the camera is blind closer than `max_disp`'s
+/// depth), and the dead-reckoned distance driven since says how near it now is.
+#[derive(Debug, Clone, Copy)]
+struct FrontMemory {
+    range_m: f64,
+    pose: DeadReckonedPose,
+}
+
+impl FrontMemory {
+    /// The front range now: this frame's, or the remembered one less the way driven
+    /// toward it while facing the same way (`None`: nothing known).
+    fn front_m(
+        memory: &mut Option<Self>,
+        seen_m: Option<f64>,
+        pose: &DeadReckonedPose,
+    ) -> Option<f64> {
+        if let Some(m) = seen_m {
+            *memory = Some(Self {
+                range_m: m,
+                pose: *pose,
+            });
+            return Some(m);
+        }
+        let m = (*memory)?;
+        if wrap_rad(pose.heading_rad - m.pose.heading_rad).abs() > FRONT_MEMORY_TURN_RAD {
+            *memory = None;
+            return None;
+        }
+        let (s, c) = m.pose.heading_rad.sin_cos();
+        let driven = (pose.x_m - m.pose.x_m) * c + (pose.y_m - m.pose.y_m) * s;
+        Some((m.range_m - driven).max(0.0))
+    }
+}
+
 /// The exploring navigator's state.
 #[derive(Debug, Clone)]
 pub struct Explorer {
@@ -110,6 +157,14 @@ pub struct Explorer {
     last_retry_ns: Option<u64>,
     /// The first frame has been seen (the start spin begun).
     started: bool,
+    /// The middle window's last range.
+    front: Option<FrontMemory>,
+    /// The picture against dead reckoning.
+    stall: StallCheck,
+    /// A stall was found this frame: recover before anything else.
+    stalled: bool,
+    /// The last command sent.
+    last_command: MotionCommand,
     status: ExploreStatus,
 }
 
@@ -137,6 +192,10 @@ impl Explorer {
             last_intersection: IntersectionType::Unknown,
             last_retry_ns: None,
             started: false,
+            front: None,
+            stall: StallCheck::default(),
+            stalled: false,
+            last_command: MotionCommand::Stop,
             status: ExploreStatus::default(),
         }
     }
@@ -189,6 +248,18 @@ impl Explorer {
         scan: &ObstacleScan,
         turn_rate_rad_s: f64,
     ) -> Option<PoseCorrection> {
+        if let Some(back) = self.stall.update(scan, pose) {
+            // Pinned: what dead reckoning integrated since the picture last changed never
+            // happened.
+            self.stalled = true;
+            self.status.stalls += 1;
+            return Some(PoseCorrection {
+                dx_m: back.x_m - pose.x_m,
+                dy_m: back.y_m - pose.y_m,
+                dheading_rad: back.heading_rad - pose.heading_rad,
+                overlap: 0.0,
+            });
+        }
         // Early scans would be aligned to themselves; a scan taken while turning fast is
         // placed by a heading that leads the camera's, and is not added to the grid either.
         if self.status.plans < 3 || !self.scan_placeable(turn_rate_rad_s) {
@@ -198,12 +269,14 @@ impl Explorer {
         let fix = scan_match::align(&self.grid, pose, &points, &self.cfg.scan_match)?;
         self.status.scan_fixes += 1;
         let g = self.cfg.scan_match.gain;
-        Some(PoseCorrection {
+        let fix = PoseCorrection {
             dx_m: g * fix.dx_m,
             dy_m: g * fix.dy_m,
             dheading_rad: g * fix.dheading_rad,
             overlap: fix.overlap,
-        })
+        };
+        self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);
+        Some(fix)
     }
 
     /// Whether a scan taken at this turn rate can be placed on the grid: while turning fast
@@ -216,6 +289,7 @@ impl Explorer {
     /// One frame: adds the scan to the grid and returns the motion and its PSC ramp.
     pub fn step(&mut self, input: ExploreInput<'_>) -> (MotionCommand, u32) {
         let command = self.motion(input);
+        self.last_command = command;
         let ramp = match command {
             MotionCommand::Left | MotionCommand::Right => u32::from(self.cfg.controller.turn_ramp),
             _ => 0,
@@ -225,6 +299,16 @@ impl Explorer {
 
     fn motion(&mut self, input: ExploreInput<'_>) -> MotionCommand {
         let pose = input.pose;
+        let mut front_m = FrontMemory::front_m(&mut self.front, input.front_m, &pose);
+        if front_m.is_none() && input.scan.valid_bins() < BLIND_SCAN_BINS {
+            // Nothing in view at all: a wall nearer than the matcher's shortest range (or
+            // one without texture) fills the picture. Not a way to drive into.
+            front_m = Some(0.0);
+        }
+        let fp = self.controller.footprint();
+        let (half_length_m, half_width_m) = (fp.half_length_m(), fp.half_width_m());
+        self.grid
+            .clear_footprint(&pose, half_length_m, half_width_m);
         if input.scan.valid_bins() > 0 && self.scan_placeable(input.turn_rate_rad_s) {
             let pts = self
                 .grid
@@ -240,6 +324,33 @@ impl Explorer {
             if self.cfg.recovery.start_spin_deg > 0.0 {
                 self.recovery = Some(Recovery::look_around(self.cfg.recovery.start_spin_deg));
             }
+        }
+        if self.stalled {
+            self.stalled = false;
+            // The front range was remembered from a pose dead reckoning ran ahead of.
+            self.front = None;
+            // Driving or backing into something unseen: it is where the bumper is.
+            let fp = self.controller.footprint();
+            let (l, w) = (fp.half_length_m(), fp.half_width_m());
+            match self.last_command {
+                MotionCommand::Forward => self.grid.mark_bump(&pose, l + BUMP_GAP_M, (-w, w)),
+                MotionCommand::Reverse => self.grid.mark_bump(&pose, -l - BUMP_GAP_M, (-w, w)),
+                _ => {}
+            }
+            let stalled_left = match self.last_command {
+                MotionCommand::Left => Some(true),
+                MotionCommand::Right => Some(false),
+                _ => None,
+            };
+            let rin = self.recovery_input(&input);
+            self.recovery = Some(Recovery::after_stall(
+                &self.cfg.recovery,
+                &rin,
+                stalled_left,
+            ));
+            self.status.recoveries += 1;
+            self.controller.reset();
+            self.plan = None;
         }
         if let Some(mut r) = self.recovery.take() {
             let rin = self.recovery_input(&input);
@@ -300,7 +411,7 @@ impl Explorer {
             ControlInput {
                 pose,
                 path: &plan.path,
-                front_m: input.front_m,
+                front_m,
                 turn_rate_rad_s: input.turn_rate_rad_s,
             },
         );
@@ -451,5 +562,39 @@ impl Explorer {
             return cmd;
         }
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_front_wall_in_the_blind_zone_is_remembered_until_the_robot_turns() {
+        let mut memory = None;
+        let at = |x_m: f64, heading_deg: f64| DeadReckonedPose {
+            x_m,
+            y_m: 0.0,
+            heading_rad: heading_deg.to_radians(),
+        };
+        assert_eq!(FrontMemory::front_m(&mut memory, None, &at(0.0, 0.0)), None);
+        assert_eq!(
+            FrontMemory::front_m(&mut memory, Some(0.8), &at(0.0, 0.0)),
+            Some(0.8)
+        );
+        // Blind now: 0.5 m driven toward it leaves 0.3 m.
+        let left = FrontMemory::front_m(&mut memory, None, &at(0.5, 2.0)).unwrap_or(9.0);
+        assert!((left - 0.3).abs() < 0.01, "{left}");
+        // Driven past it: 0, never negative.
+        assert_eq!(
+            FrontMemory::front_m(&mut memory, None, &at(1.0, 0.0)),
+            Some(0.0)
+        );
+        // Turned away: nothing known.
+        assert_eq!(
+            FrontMemory::front_m(&mut memory, None, &at(1.0, 40.0)),
+            None
+        );
+        assert_eq!(FrontMemory::front_m(&mut memory, None, &at(1.0, 0.0)), None);
     }
 }

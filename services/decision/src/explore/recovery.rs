@@ -157,6 +157,25 @@ impl Recovery {
         }
     }
 
+    /// After a stall (the robot pinned while it moved): back up when clear behind, then
+    /// rotate away from the turn that stalled (`stalled_left`; `None`: it was not turning,
+    /// rotate toward the freer side), then wait.
+    pub fn after_stall(
+        cfg: &RecoveryConfig,
+        input: &RecoveryInput,
+        stalled_left: Option<bool>,
+    ) -> Self {
+        let mut r = Self::start(cfg, input);
+        if let Some(was_left) = stalled_left {
+            for b in &mut r.steps {
+                if let Behaviour::Rotate { left, .. } = b {
+                    *left = !was_left;
+                }
+            }
+        }
+        r
+    }
+
     /// A look around: rotate in place by `degrees` counter-clockwise, pausing on the way.
     pub fn look_around(degrees: f64) -> Self {
         let mut steps = rotation(degrees.to_radians(), true);

@@ -345,7 +345,7 @@ impl Navigator {
         if let Some(e) = &self.explorer {
             let s = e.status();
             return format!(
-                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {}{}{}",
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} stalls {}{}{}",
                 e.goal_m()
                     .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
                 s.plans,
@@ -353,6 +353,7 @@ impl Navigator {
                 s.blacklisted,
                 s.recoveries,
                 s.scan_fixes,
+                s.stalls,
                 if e.recovering() { " recovering" } else { "" },
                 if s.done { " done" } else { "" },
             );

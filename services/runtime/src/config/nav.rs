@@ -105,7 +105,10 @@ impl GridConfig {
 pub struct ScanMatchConfig {
     /// Align scans at all.
     pub enabled: bool,
-    /// Search half-width in x and y around the dead-reckoned pose, metres.
+    /// Search half-width in x and y around the dead-reckoned pose, metres. 0 (the default)
+    /// searches the heading only: the scan's nearest-percentile ranges draw a wall nearer
+    /// when seen from farther, and a position search turned that into a pull backwards
+    /// (docs/navigation.md, the explorer's status).
     pub search_m: f64,
     /// Search step in x and y, metres.
     pub step_m: f64,
@@ -125,7 +128,7 @@ impl Default for ScanMatchConfig {
     fn default() -> Self {
         Self {
             enabled: true,
-            search_m: 0.1,
+            search_m: 0.0,
             step_m: 0.05,
             search_deg: 3.0,
             step_deg: 1.0,
@@ -298,7 +301,9 @@ pub struct ControllerConfig {
     pub turn_lead_s: f64,
     /// The footprint swept this far ahead must be clear to drive ahead, metres.
     pub check_ahead_m: f64,
-    /// A front range (middle window) nearer than this stops driving ahead, metres.
+    /// A front range (middle window, or its last reading less the way driven since while
+    /// it is blind) nearer than this stops driving ahead, metres; the matcher reads nothing
+    /// nearer than `max_disp`'s depth (0.35 m at 320x240), so this must lie above it.
     pub stop_range_m: f64,
     /// PSC ramp code (0..63; 0 = at once, 1 = 0.75 s .. 63 = 60 s for the full pulse range)
     /// for turns: a turn that starts gently stops where it was meant to, and a scan taken
@@ -314,7 +319,7 @@ impl Default for ControllerConfig {
             aligned_deg: 6.0,
             turn_lead_s: 0.1,
             check_ahead_m: 0.12,
-            stop_range_m: 0.3,
+            stop_range_m: 0.5,
             turn_ramp: 8,
         }
     }

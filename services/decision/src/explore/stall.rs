@@ -1,0 +1,198 @@
+//! The stall check: a robot pinned against a wall while its wheels are told to move sees the
+//! same picture, but dead reckoning integrates the commands on, so the pose (and every scan
+//! added from it) runs away from the truth. The camera is the only witness: when the scan
+//! has not changed while dead reckoning says the robot moved far enough to change it, the
+//! robot is stalled, and the pose is put back where the scan last changed.
+//!
+//! Written here rather than shared with the fuzzy policy's wedge detector, which watches its
+//! three windows and acts on its own maneuvers; this one watches the scan bins the grid uses.
+
+use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
+
+use super::controller::wrap_rad;
+use crate::odometry::DeadReckonedPose;
+
+/// Bins valid in both scans needed to compare them.
+const MIN_COMMON_BINS: usize = 16;
+/// The scan is unchanged when the median relative range change is below this.
+const SAME_REL: f64 = 0.03;
+/// Dead-reckoned travel since the scan last changed that must change it, metres ...
+const MOVED_M: f64 = 0.2;
+/// ... or turn, radians (20 degrees: about 24 of the 64 bins over a 53 degree view).
+const TURNED_RAD: f64 = 0.35;
+
+/// The scan and pose where the picture last changed.
+#[derive(Debug, Clone, Copy)]
+struct Anchor {
+    range_m: [f32; SCAN_BINS],
+    pose: DeadReckonedPose,
+}
+
+/// Watches the scan against dead reckoning.
+#[derive(Debug, Clone, Default)]
+pub struct StallCheck {
+    anchor: Option<Anchor>,
+}
+
+/// Bins valid in both scans needed to compare their middle thirds.
+const MIN_COMMON_MIDDLE_BINS: usize = 6;
+/// Middle bins farther than this are not compared for a drive, metres: 0.2 m is then at
+/// least 10 % of their range.
+const MIDDLE_RANGE_M: f32 = 2.0;
+
+/// Median relative change between two scans over the bins in `bins` valid in both and
+/// nearer than `max_m` (`None`: fewer than `min_bins`).
+fn median_change(
+    a: &[f32; SCAN_BINS],
+    b: &[f32; SCAN_BINS],
+    bins: std::ops::Range<usize>,
+    max_m: f32,
+    min_bins: usize,
+) -> Option<f64> {
+    let mut rel: Vec<f64> = a[bins.clone()]
+        .iter()
+        .zip(&b[bins])
+        .filter(|&(&x, &y)| x > 0.0 && y > 0.0 && x < max_m && y < max_m)
+        .map(|(&x, &y)| (f64::from(x) - f64::from(y)).abs() / f64::from(x.min(y)))
+        .collect();
+    if rel.len() < min_bins {
+        return None;
+    }
+    rel.sort_unstable_by(f64::total_cmp);
+    Some(rel[rel.len() / 2])
+}
+
+impl StallCheck {
+    /// Moves the remembered pose by a correction applied to dead reckoning this frame (the
+    /// pose put back after a stall is then in the corrected frame).
+    pub fn shift(&mut self, dx_m: f64, dy_m: f64, dheading_rad: f64) {
+        if let Some(a) = self.anchor.as_mut() {
+            a.pose.x_m += dx_m;
+            a.pose.y_m += dy_m;
+            a.pose.heading_rad += dheading_rad;
+        }
+    }
+
+    /// Feeds this frame's scan and dead-reckoned pose. Returns the pose where the picture last
+    /// changed when the robot is stalled (the scan the same, dead reckoning moved or turned
+    /// past the limits since); the check then starts afresh from there.
+    pub fn update(
+        &mut self,
+        scan: &ObstacleScan,
+        pose: &DeadReckonedPose,
+    ) -> Option<DeadReckonedPose> {
+        let Some(anchor) = self.anchor else {
+            self.anchor = Some(Anchor {
+                range_m: scan.range_m,
+                pose: *pose,
+            });
+            return None;
+        };
+        // A turn changes every bin; a drive need not (a hallway's side walls read the same
+        // ranges at the same bearings wherever the robot is along it), so a drive is judged
+        // by the middle third, where a near wall can only be ahead.
+        let all = median_change(
+            &anchor.range_m,
+            &scan.range_m,
+            0..SCAN_BINS,
+            f32::INFINITY,
+            MIN_COMMON_BINS,
+        );
+        let middle = median_change(
+            &anchor.range_m,
+            &scan.range_m,
+            SCAN_BINS / 3..2 * SCAN_BINS / 3,
+            MIDDLE_RANGE_M,
+            MIN_COMMON_MIDDLE_BINS,
+        );
+        let same = |c: Option<f64>| c.is_some_and(|c| c < SAME_REL);
+        match all {
+            Some(change) if change < SAME_REL => {
+                let moved = (pose.x_m - anchor.pose.x_m).hypot(pose.y_m - anchor.pose.y_m);
+                let turned = wrap_rad(pose.heading_rad - anchor.pose.heading_rad).abs();
+                if (moved >= MOVED_M && same(middle)) || turned >= TURNED_RAD {
+                    self.anchor = Some(Anchor {
+                        range_m: scan.range_m,
+                        pose: anchor.pose,
+                    });
+                    return Some(anchor.pose);
+                }
+                None
+            }
+            // Changed, or too little seen to tell: start from here.
+            _ => {
+                self.anchor = Some(Anchor {
+                    range_m: scan.range_m,
+                    pose: *pose,
+                });
+                None
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan(range_m: f32) -> ObstacleScan {
+        ObstacleScan {
+            tan_half_fov: 0.5,
+            range_m: [range_m; SCAN_BINS],
+            ..ObstacleScan::default()
+        }
+    }
+
+    fn pose(x_m: f64, heading_deg: f64) -> DeadReckonedPose {
+        DeadReckonedPose {
+            x_m,
+            y_m: 0.0,
+            heading_rad: heading_deg.to_radians(),
+        }
+    }
+
+    #[test]
+    fn a_turn_that_leaves_the_picture_unchanged_is_a_stall_and_restores_the_pose() {
+        let mut s = StallCheck::default();
+        assert_eq!(s.update(&scan(0.8), &pose(0.0, 10.0)), None);
+        // Dead reckoning turns on, the picture stays (1 % noise).
+        assert_eq!(s.update(&scan(0.808), &pose(0.0, 20.0)), None);
+        let back = s.update(&scan(0.792), &pose(0.0, 35.0));
+        assert_eq!(back.map(|p| p.heading_rad.to_degrees().round()), Some(10.0));
+    }
+
+    #[test]
+    fn a_picture_that_changes_with_the_motion_or_a_blind_one_is_no_stall() {
+        let mut s = StallCheck::default();
+        // Driving toward a wall 2 m ahead: 0.2 m nearer is 10 % nearer.
+        for k in 0..10 {
+            let x = 0.05 * f64::from(k);
+            assert_eq!(s.update(&scan(2.0 - x as f32), &pose(x, 0.0)), None);
+        }
+        // Driving down a hallway whose side walls read the same at every step, with nothing
+        // near ahead: no stall.
+        let mut s = StallCheck::default();
+        let mut hallway = scan(1.2);
+        hallway.range_m[SCAN_BINS / 3..2 * SCAN_BINS / 3].fill(4.0);
+        for k in 0..20 {
+            assert_eq!(s.update(&hallway, &pose(0.05 * f64::from(k), 0.0)), None);
+        }
+        // A wall 1 m ahead that stays 1 m ahead while dead reckoning drives 0.2 m: a stall.
+        let mut s = StallCheck::default();
+        let stalled = (0..10).any(|k| {
+            s.update(&scan(1.0), &pose(0.05 * f64::from(k), 0.0))
+                .is_some()
+        });
+        assert!(stalled);
+        // Blind (no bins): cannot tell, never a stall.
+        let mut s = StallCheck::default();
+        for k in 0..10 {
+            assert_eq!(s.update(&scan(0.0), &pose(0.0, f64::from(k) * 10.0)), None);
+        }
+        // Standing still with the same picture: no stall.
+        let mut s = StallCheck::default();
+        for _ in 0..10 {
+            assert_eq!(s.update(&scan(1.0), &pose(0.0, 0.0)), None);
+        }
+    }
+}
