@@ -43,7 +43,9 @@ pub fn run(config_path: &Path, opts: &DriveOptions, json: bool) -> Result<()> {
     );
     println!(
         "decision time (wall clock, this machine): median {:.0} us, p99 {:.0} us, largest {:.0} us",
-        r.decision_us.0, r.decision_us.1, r.decision_us.2
+        r.decision_latency.p50_ns as f64 * 1e-3,
+        r.decision_latency.p99_ns as f64 * 1e-3,
+        r.decision_latency.max_ns as f64 * 1e-3
     );
     println!("intersections: {:?}", r.intersections);
     println!("commands sent: {:?}", r.commands);

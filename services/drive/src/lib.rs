@@ -25,6 +25,7 @@ use hvs_actuator::commander::{Commander, DecisionInput};
 use hvs_decision::Navigator;
 use hvs_fusion::FusionPath;
 use hvs_runtime::config::HvsConfig;
+use hvs_runtime::stats::{LatencySummary, LatencyWindow};
 use hvs_shared::messages::{IntersectionType, MotionCommand, RangeSource};
 use hvs_sim::{
     GridMap, MapError, MazeError, MazeOptions, Pose, SimConfig, SimMotionNoise, SimRenderError,
@@ -155,9 +156,9 @@ pub struct DriveReport {
     pub commands: BTreeMap<String, u64>,
     /// Wall-clock seconds the drive took.
     pub wall_s: f64,
-    /// Time the navigator took per decision on this machine (wall clock, not simulated),
-    /// median / 99th percentile / largest, microseconds.
-    pub decision_us: (f64, f64, f64),
+    /// Time the navigator took per decision on this machine (wall clock, not simulated):
+    /// count, median, 99th percentile and largest, nanoseconds.
+    pub decision_latency: LatencySummary,
     /// Share of the map's reachable floor cells (4-connected to the start cell) the camera
     /// saw, percent: the cell's centre within 2 m of the camera, inside its horizontal field
     /// of view and in its line of sight, at some frame (sim ground truth, [`coverage`]).
@@ -262,7 +263,7 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
     let dt = 1.0 / opts.rate_hz;
     let steps = (opts.duration_s * opts.rate_hz).round() as u64;
     let started = std::time::Instant::now();
-    let mut decision_us: Vec<f64> = Vec::with_capacity(steps as usize);
+    let mut decision_latency = LatencyWindow::default();
     let ns = |t: f64| (t * 1e9) as u64;
     // Per-decision trace on stderr, for tuning.
     let trace = std::env::var_os("HVS_DRIVE_TRACE").is_some();
@@ -283,7 +284,7 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
         let now = ns(t) + 1;
         let decide_started = std::time::Instant::now();
         let nd = nav.decide(&windows, config.fusion.windows as usize, fusion.scan(), now);
-        decision_us.push(decide_started.elapsed().as_secs_f64() * 1e6);
+        decision_latency.record(decide_started.elapsed().as_nanos() as u64);
         if trace {
             let p = world.pose();
             eprintln!(
@@ -398,7 +399,7 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
         first_turn,
         commands,
         wall_s: started.elapsed().as_secs_f64(),
-        decision_us: percentiles_us(&mut decision_us),
+        decision_latency: decision_latency.summary(),
         coverage_pct: seen.pct(),
         reachable_cells: seen.reachable_cells(),
         explored_s,
@@ -412,16 +413,6 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
         motion_noise: world.robot().motion_noise().is_some(),
         seed: sim_config.seed,
     })
-}
-
-/// Median, 99th percentile and largest of `samples` (all 0 when empty).
-fn percentiles_us(samples: &mut [f64]) -> (f64, f64, f64) {
-    if samples.is_empty() {
-        return (0.0, 0.0, 0.0);
-    }
-    samples.sort_unstable_by(f64::total_cmp);
-    let at = |q: f64| samples[((samples.len() - 1) as f64 * q).round() as usize];
-    (at(0.5), at(0.99), at(1.0))
 }
 
 /// The map to drive: the generated maze, the map file given, or the config's.

@@ -7,7 +7,7 @@ pub struct LatencyWindow {
 }
 
 /// Percentiles of a set of latency samples.
-#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct LatencySummary {
     /// Number of samples.
     pub count: u64,

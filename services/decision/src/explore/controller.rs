@@ -9,7 +9,7 @@
 use hvs_runtime::config::{ControllerConfig, PulsePair, PulseTable, RobotConfig};
 use hvs_shared::messages::MotionCommand;
 
-use super::grid::{OccupancyGrid, to_grid_frame};
+use super::grid::{OccupancyGrid, for_each_rect_sample, to_grid_frame};
 use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 
@@ -109,23 +109,15 @@ impl FootprintCheck {
         ahead: (f64, f64),
         left: (f64, f64),
     ) -> (usize, usize, usize) {
-        let step = 0.5 * grid.cell_m();
         let (mut occupied, mut unknown, mut all) = (0, 0, 0);
-        let mut a = ahead.0;
-        while a <= ahead.1 + 1e-9 {
-            let mut l = left.0;
-            while l <= left.1 + 1e-9 {
-                let (x, y) = to_grid_frame(pose, (a, l));
-                match grid.state_at(x, y) {
-                    CellState::Occupied => occupied += 1,
-                    CellState::Unknown => unknown += 1,
-                    CellState::Free => {}
-                }
-                all += 1;
-                l += step;
+        for_each_rect_sample(pose, ahead, left, 0.5 * grid.cell_m(), |x, y| {
+            match grid.state_at(x, y) {
+                CellState::Occupied => occupied += 1,
+                CellState::Unknown => unknown += 1,
+                CellState::Free => {}
             }
-            a += step;
-        }
+            all += 1;
+        });
         (occupied, unknown, all)
     }
 

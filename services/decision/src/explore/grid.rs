@@ -35,6 +35,29 @@ pub struct ScanPoints {
     pub rays: Vec<((f64, f64), f64)>,
 }
 
+/// Calls `f` with the grid-frame position of every sample of the robot-frame rectangle
+/// `ahead_m` x `left_m` (each a closed range, metres) seen from `pose`, `step_m` apart, row
+/// by row from the rear: the one sampling that the footprint checks, the footprint clearing
+/// and bumps share.
+pub fn for_each_rect_sample(
+    pose: &DeadReckonedPose,
+    ahead_m: (f64, f64),
+    left_m: (f64, f64),
+    step_m: f64,
+    mut f: impl FnMut(f64, f64),
+) {
+    let mut a = ahead_m.0;
+    while a <= ahead_m.1 + 1e-9 {
+        let mut l = left_m.0;
+        while l <= left_m.1 + 1e-9 {
+            let (x, y) = to_grid_frame(pose, (a, l));
+            f(x, y);
+            l += step_m;
+        }
+        a += step_m;
+    }
+}
+
 /// Transforms a robot-frame point to the grid frame at `pose`.
 pub fn to_grid_frame(pose: &DeadReckonedPose, p: (f64, f64)) -> (f64, f64) {
     let (s, c) = pose.heading_rad.sin_cos();
@@ -276,37 +299,37 @@ impl OccupancyGrid {
         half_length_m: f64,
         half_width_m: f64,
     ) {
-        let step = 0.5 * self.cfg.cell_m;
-        let mut a = -half_length_m;
-        while a <= half_length_m + 1e-9 {
-            let mut l = -half_width_m;
-            while l <= half_width_m + 1e-9 {
-                let (x, y) = to_grid_frame(pose, (a, l));
+        for_each_rect_sample(
+            pose,
+            (-half_length_m, half_length_m),
+            (-half_width_m, half_width_m),
+            0.5 * self.cfg.cell_m,
+            |x, y| {
                 if let Some(cell) = self.cell_of(x, y) {
                     let now = f64::from(self.log_odds(cell));
                     if now <= self.cfg.decided_log_odds {
                         self.update(cell, self.cfg.min_log_odds - now);
                     }
                 }
-                l += step;
-            }
-            a += step;
-        }
+            },
+        );
     }
 
     /// Marks a robot-frame segment from `(ahead_m, left0_m)` to `(ahead_m, left1_m)` occupied
     /// (a bump: the robot was stopped there by something the camera never saw).
     pub fn mark_bump(&mut self, pose: &DeadReckonedPose, ahead_m: f64, left_m: (f64, f64)) {
-        let step = 0.5 * self.cfg.cell_m;
-        let mut l = left_m.0;
-        while l <= left_m.1 + 1e-9 {
-            let (x, y) = to_grid_frame(pose, (ahead_m, l));
-            if let Some(cell) = self.cell_of(x, y) {
-                let now = f64::from(self.log_odds(cell));
-                self.update(cell, self.cfg.max_log_odds - now);
-            }
-            l += step;
-        }
+        for_each_rect_sample(
+            pose,
+            (ahead_m, ahead_m),
+            left_m,
+            0.5 * self.cfg.cell_m,
+            |x, y| {
+                if let Some(cell) = self.cell_of(x, y) {
+                    let now = f64::from(self.log_odds(cell));
+                    self.update(cell, self.cfg.max_log_odds - now);
+                }
+            },
+        );
     }
 
     /// Whether a cell index is inside the grid after an offset.

@@ -329,18 +329,21 @@ impl Explorer {
             self.stalled = false;
             // The front range was remembered from a pose dead reckoning ran ahead of.
             self.front = None;
-            // Driving or backing into something unseen: it is where the bumper is.
-            let fp = self.controller.footprint();
-            let (l, w) = (fp.half_length_m(), fp.half_width_m());
-            match self.last_command {
-                MotionCommand::Forward => self.grid.mark_bump(&pose, l + BUMP_GAP_M, (-w, w)),
-                MotionCommand::Reverse => self.grid.mark_bump(&pose, -l - BUMP_GAP_M, (-w, w)),
-                _ => {}
-            }
+            // Driving or backing into something unseen: it is where the bumper is. Turning:
+            // turn the other way.
+            let (l, w) = (half_length_m, half_width_m);
             let stalled_left = match self.last_command {
+                MotionCommand::Forward => {
+                    self.grid.mark_bump(&pose, l + BUMP_GAP_M, (-w, w));
+                    None
+                }
+                MotionCommand::Reverse => {
+                    self.grid.mark_bump(&pose, -l - BUMP_GAP_M, (-w, w));
+                    None
+                }
                 MotionCommand::Left => Some(true),
                 MotionCommand::Right => Some(false),
-                _ => None,
+                MotionCommand::Stop => None,
             };
             let rin = self.recovery_input(&input);
             self.recovery = Some(Recovery::after_stall(
