@@ -8,7 +8,8 @@
 #
 # SET=maze (the 16 poses of scripts/maze-coverage.sh) or SET=generated (SEEDS, default
 # 1..20); DURATION (seconds, default 300); CONTRAST (e.g. 0.2 for plain walls); POLICIES
-# (default "fuzzy explore"). About 9 minutes per navigator for 20 runs of 300 s on 2 cores.
+# (default "fuzzy explore"); SCAN_FILTER (fusion.scan_filter for every policy; by default
+# "agreement" for explore and "none" for the others). About 9 minutes per navigator for 20 runs of 300 s on 2 cores.
 set -euo pipefail
 BIN=$(realpath -m "${1:-$(dirname "$0")/../target/release/hvs}")
 OUT=$(realpath -m "${2:-$(mktemp -d /tmp/hvs-navcmp.XXXXXX)}")
@@ -25,9 +26,15 @@ mkdir -p "$OUT"
 TAG="nav-compare-$$"
 trap 'rm -f config/.$TAG-*.toml' EXIT
 for p in $POLICIES; do
-  sed "s/^policy = \"fuzzy\"/policy = \"$p\"/" config/sim.toml > "config/.$TAG-$p.toml"
+  # The explorer runs with the obstacle scan's agreement filter (fusion.scan_filter), the
+  # other policies with the scan they were tuned on; SCAN_FILTER overrides both.
+  filter=${SCAN_FILTER:-$([ "$p" = explore ] && echo agreement || echo none)}
+  sed -e "s/^policy = \"fuzzy\"/policy = \"$p\"/" \
+      -e "s/^scan_filter = \"none\"/scan_filter = \"$filter\"/" config/sim.toml > "config/.$TAG-$p.toml"
   grep -q "^policy = \"$p\"" "config/.$TAG-$p.toml" \
     || { echo "nav-compare: could not set policy = \"$p\" in a copy of config/sim.toml" >&2; exit 2; }
+  grep -q "^scan_filter = \"$filter\"" "config/.$TAG-$p.toml" \
+    || { echo "nav-compare: could not set scan_filter = \"$filter\" in a copy of config/sim.toml" >&2; exit 2; }
 done
 EXTRA=""
 [ -n "${CONTRAST:-}" ] && EXTRA="--wall-contrast $CONTRAST"

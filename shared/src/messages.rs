@@ -289,9 +289,15 @@ pub struct ObstacleScan {
     /// Bins filled from the 640x480 path (the fast path had no data there).
     pub hi_bins: u32,
     /// Depth of the bin's nearest obstacle (a low percentile of its points), metres; 0 = no
-    /// data.
+    /// data; [`SCAN_SCATTERED`] (negative) = the bin's points agree on no depth, as a
+    /// surface nearer than the matcher's shortest range gives.
     pub range_m: [f32; SCAN_BINS],
 }
+
+/// `ObstacleScan::range_m` of a bin whose points scatter in depth (no surface the matcher
+/// can range; most often one nearer than its shortest range). Negative, so every `r > 0`
+/// check reads it as no data.
+pub const SCAN_SCATTERED: f32 = -1.0;
 
 impl Default for ObstacleScan {
     fn default() -> Self {
@@ -308,6 +314,15 @@ impl ObstacleScan {
     /// Bins with data.
     pub fn valid_bins(&self) -> usize {
         self.range_m.iter().filter(|&&r| r > 0.0).count()
+    }
+
+    /// Of the bins `bins`, those with data and those marked [`SCAN_SCATTERED`].
+    pub fn valid_and_scattered(&self, bins: std::ops::Range<usize>) -> (usize, usize) {
+        let slice = self.range_m.get(bins).unwrap_or(&[]);
+        (
+            slice.iter().filter(|&&r| r > 0.0).count(),
+            slice.iter().filter(|&&r| r < 0.0).count(),
+        )
     }
 }
 

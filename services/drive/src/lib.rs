@@ -267,6 +267,7 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
     let ns = |t: f64| (t * 1e9) as u64;
     // Per-decision trace on stderr, for tuning.
     let trace = std::env::var_os("HVS_DRIVE_TRACE").is_some();
+    let trace_scan = trace && std::env::var_os("HVS_DRIVE_TRACE_SCAN").is_some();
     for step in 0..steps {
         let t = step as f64 * dt;
         world.render(t, &mut left, &mut right, None)?;
@@ -308,6 +309,20 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
                 nd.pose.heading_rad.to_degrees(),
                 nav.describe()
             );
+            if trace_scan {
+                // The obstacle scan's 64 depths (0 = no data), to compare with the true
+                // pose's ray casts when tuning perception.
+                let sc = fusion.scan();
+                eprintln!(
+                    "scan {t:6.2} {} {}",
+                    sc.tan_half_fov,
+                    sc.range_m
+                        .iter()
+                        .map(|r| format!("{r:.3}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                );
+            }
         }
         if let Some(_at) = std::env::var("HVS_DRIVE_MAP_AT")
             .ok()

@@ -137,6 +137,14 @@ impl FrontMemory {
     }
 }
 
+/// Whether the picture says a wall nearer than the matcher's shortest range (or one without
+/// texture) fills it: nothing in view, or more of the middle third's bins scattered
+/// ([`hvs_shared::messages::SCAN_SCATTERED`]) than ranged.
+fn blind(scan: &ObstacleScan) -> bool {
+    let (valid, scattered) = scan.valid_and_scattered(SCAN_BINS / 3..2 * SCAN_BINS / 3);
+    scan.valid_bins() < BLIND_SCAN_BINS || scattered > valid
+}
+
 /// The exploring navigator's state.
 #[derive(Debug, Clone)]
 pub struct Explorer {
@@ -300,9 +308,8 @@ impl Explorer {
     fn motion(&mut self, input: ExploreInput<'_>) -> MotionCommand {
         let pose = input.pose;
         let mut front_m = FrontMemory::front_m(&mut self.front, input.front_m, &pose);
-        if front_m.is_none() && input.scan.valid_bins() < BLIND_SCAN_BINS {
-            // Nothing in view at all: a wall nearer than the matcher's shortest range (or
-            // one without texture) fills the picture. Not a way to drive into.
+        if front_m.is_none() && blind(input.scan) {
+            // Not a way to drive into.
             front_m = Some(0.0);
         }
         let fp = self.controller.footprint();
@@ -571,6 +578,27 @@ impl Explorer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_picture_of_scattered_bins_in_the_middle_is_blind() {
+        use hvs_shared::messages::SCAN_SCATTERED;
+        let mut scan = ObstacleScan {
+            tan_half_fov: 0.5,
+            range_m: [1.5; SCAN_BINS],
+            ..ObstacleScan::default()
+        };
+        assert!(!blind(&scan));
+        // The middle third scattered (a wall nearer than the matcher sees), the sides
+        // ranged: blind.
+        scan.range_m[SCAN_BINS / 3..2 * SCAN_BINS / 3].fill(SCAN_SCATTERED);
+        assert!(blind(&scan));
+        // Scattered sides only: the middle still vouches for the way ahead.
+        scan.range_m = [1.5; SCAN_BINS];
+        scan.range_m[..SCAN_BINS / 3].fill(SCAN_SCATTERED);
+        assert!(!blind(&scan));
+        // Nothing at all: blind.
+        assert!(blind(&ObstacleScan::default()));
+    }
 
     #[test]
     fn a_front_wall_in_the_blind_zone_is_remembered_until_the_robot_turns() {

@@ -28,6 +28,20 @@ pub enum EdgeDetector {
     Sobel,
 }
 
+/// How the obstacle scan judges a bin's points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ScanFilter {
+    /// A low percentile of each bin's points, whatever their spread (what the `fuzzy`
+    /// navigator was tuned on).
+    #[default]
+    None,
+    /// Per image column, only depths the column's points agree on; a bin whose columns all
+    /// scatter (a wall nearer than the matcher's shortest range) reads as scattered, not
+    /// as open space. For `policy = "explore"` (docs/navigation.md has the measurements).
+    Agreement,
+}
+
 /// Edges, fused map and ranges.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -57,6 +71,8 @@ pub struct FusionConfig {
     /// are left out of the ranges; the others weigh by their confidence in the mean and in
     /// the window's confidence.
     pub min_confidence: f32,
+    /// How the obstacle scan judges a bin's points.
+    pub scan_filter: ScanFilter,
 }
 
 impl Default for FusionConfig {
@@ -73,6 +89,7 @@ impl Default for FusionConfig {
             max_height_m: 1.5,
             min_valid_px: 30,
             min_confidence: 0.05,
+            scan_filter: ScanFilter::None,
         }
     }
 }
