@@ -259,7 +259,11 @@ impl ObstacleScanner {
         width: usize,
         p: &RangeParams,
     ) -> ObstacleScan {
-        self.depths.resize_with(width, Vec::new);
+        // Per image column for the agreement test, per bin otherwise (no column split to
+        // pool again on the default path).
+        let per_column = p.scan_filter == ScanFilter::Agreement;
+        self.depths
+            .resize_with(if per_column { width } else { SCAN_BINS }, Vec::new);
         self.depths.iter_mut().for_each(Vec::clear);
         let mut scan = ObstacleScan {
             tan_half_fov: (width as f64 / 2.0 / p.depth.focal_px) as f32,
@@ -301,23 +305,22 @@ impl ObstacleScanner {
                 .map(|c| &c[v * width..(v + 1) * width]);
             for (x, &d) in row.iter().enumerate() {
                 if d >= lo_q8 && conf_row.is_none_or(|c| c[x] >= p.min_confidence) {
-                    self.depths[x].push((fb * DISPARITY_SCALE as f64 / d as f64) as f32);
+                    let at = if per_column { x } else { x * SCAN_BINS / width };
+                    self.depths[at].push((fb * DISPARITY_SCALE as f64 / d as f64) as f32);
                 }
             }
         }
         for (bin, slot) in scan.range_m.iter_mut().enumerate() {
-            let columns = &mut self.depths[bin * width / SCAN_BINS..(bin + 1) * width / SCAN_BINS];
-            if p.scan_filter == ScanFilter::None {
-                self.pool.clear();
-                columns.iter().for_each(|c| self.pool.extend_from_slice(c));
-                if self.pool.len() >= SCAN_MIN_POINTS {
-                    let k =
-                        ((self.pool.len() - 1) as f64 * SCAN_PERCENTILE / 100.0).round() as usize;
-                    let (_, v, _) = self.pool.select_nth_unstable_by(k, f32::total_cmp);
+            if !per_column {
+                let depths = &mut self.depths[bin];
+                if depths.len() >= SCAN_MIN_POINTS {
+                    let k = ((depths.len() - 1) as f64 * SCAN_PERCENTILE / 100.0).round() as usize;
+                    let (_, v, _) = depths.select_nth_unstable_by(k, f32::total_cmp);
                     *slot = *v;
                 }
                 continue;
             }
+            let columns = &mut self.depths[bin * width / SCAN_BINS..(bin + 1) * width / SCAN_BINS];
             // The nearest column that sees a surface; scattered if every column with enough
             // points scatters.
             let mut nearest: Option<f32> = None;
@@ -578,12 +581,19 @@ mod tests {
         }
         let mut p = params(3, RangeStatistic::Median);
         p.min_height_m = 0.05;
-        let scan = ObstacleScanner::new().compute(&disp, None, w, &p);
-        assert!((scan.tan_half_fov - 32.0 / 320.0).abs() < 1e-6);
-        for (i, &r) in scan.range_m.iter().enumerate() {
-            let want = if i < 32 { 1.0 } else { 2.0 };
-            assert!((r - want).abs() < 0.01, "bin {i}: {r} m, want {want} m");
+        for filter in [ScanFilter::None, ScanFilter::Agreement] {
+            p.scan_filter = filter;
+            let scan = ObstacleScanner::new().compute(&disp, None, w, &p);
+            assert!((scan.tan_half_fov - 32.0 / 320.0).abs() < 1e-6);
+            for (i, &r) in scan.range_m.iter().enumerate() {
+                let want = if i < 32 { 1.0 } else { 2.0 };
+                assert!(
+                    (r - want).abs() < 0.01,
+                    "{filter:?} bin {i}: {r} m, want {want} m"
+                );
+            }
         }
+        let scan = ObstacleScanner::new().compute(&disp, None, w, &p);
         // The floor alone is no obstacle.
         let mut floor_only = disp.clone();
         floor_only[..w * h / 2].fill(0);
