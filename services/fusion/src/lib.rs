@@ -225,19 +225,19 @@ pub const SCAN_MIN_AGREEMENT: f64 = 0.6;
 /// Share a nearer depth needs when the column's median depth agrees (a surface's top or
 /// bottom edge in front of another: two surfaces, each a tight cluster).
 pub const SCAN_MIN_NEAR_AGREEMENT: f64 = 0.2;
-/// Relative depth difference within which a point agrees with the bin's range (10 %: about
+/// Relative depth difference within which a point agrees with a column's range (10 %: about
 /// one pixel of disparity at 2 m).
 pub const SCAN_AGREE_FRACTION: f32 = 0.1;
 
 /// The obstacle scan of a disparity map: per column bin, a low percentile of the depths of
 /// the points between the floor and ceiling limits; with [`ScanFilter::Agreement`], the
 /// nearest of its image columns' such depths where the column's points agree on a surface
-/// ([`SCAN_SCATTERED`] where none does). It uses the
-/// dense map, not the fused (edge-only) one: the local map wants every bin filled, and the
-/// matcher's own texture and uniqueness checks already removed most unreliable pixels.
+/// ([`SCAN_SCATTERED`] where none does). It uses the dense map, not the fused (edge-only)
+/// one: the local map wants every bin filled, and the matcher's own texture and uniqueness
+/// checks already removed most unreliable pixels.
 #[derive(Debug, Default)]
 pub struct ObstacleScanner {
-    /// Depths per image column.
+    /// Depths per image column ([`ScanFilter::Agreement`]) or per bin.
     depths: Vec<Vec<f32>>,
     /// A bin's points pooled, for bins whose columns are each too sparse to judge.
     pool: Vec<f32>,
@@ -313,10 +313,10 @@ impl ObstacleScanner {
         for (bin, slot) in scan.range_m.iter_mut().enumerate() {
             if !per_column {
                 let depths = &mut self.depths[bin];
-                if depths.len() >= SCAN_MIN_POINTS {
-                    let k = ((depths.len() - 1) as f64 * SCAN_PERCENTILE / 100.0).round() as usize;
-                    let (_, v, _) = depths.select_nth_unstable_by(k, f32::total_cmp);
-                    *slot = *v;
+                if depths.len() >= SCAN_MIN_POINTS
+                    && let Some((range_m, _)) = percentile_depth(depths)
+                {
+                    *slot = range_m;
                 }
                 continue;
             }
@@ -353,14 +353,16 @@ impl ObstacleScanner {
     }
 }
 
+/// The [`SCAN_PERCENTILE`] depth of `depths` and its index once selected (`None`: empty).
+fn percentile_depth(depths: &mut [f32]) -> Option<(f32, usize)> {
+    let k = ((depths.len().checked_sub(1)?) as f64 * SCAN_PERCENTILE / 100.0).round() as usize;
+    let (_, v, _) = depths.select_nth_unstable_by(k, f32::total_cmp);
+    Some((*v, k))
+}
+
 /// The [`SCAN_PERCENTILE`] depth of `depths` if it lies on a surface (see [`agrees`]).
 fn surface_range(depths: &mut [f32]) -> Option<f32> {
-    if depths.is_empty() {
-        return None;
-    }
-    let k = ((depths.len() - 1) as f64 * SCAN_PERCENTILE / 100.0).round() as usize;
-    let (_, v, _) = depths.select_nth_unstable_by(k, f32::total_cmp);
-    let range_m = *v;
+    let (range_m, k) = percentile_depth(depths)?;
     agrees(depths, range_m, k).then_some(range_m)
 }
 
@@ -382,7 +384,7 @@ fn agrees(depths: &mut [f32], range_m: f32, k: usize) -> bool {
     if near >= SCAN_MIN_AGREEMENT {
         return true;
     }
-    if near < SCAN_MIN_NEAR_AGREEMENT || depths.is_empty() {
+    if near < SCAN_MIN_NEAR_AGREEMENT {
         return false;
     }
     let m = depths.len() / 2;
