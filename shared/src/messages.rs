@@ -614,6 +614,85 @@ impl Sequenced for ControlRequest {
     }
 }
 
+/// Cells per side of a [`NavMap`] (a square window centred near the robot).
+pub const NAV_MAP_SIDE: usize = 128;
+/// [`NavMap`] cell value of a cell never seen.
+pub const NAV_MAP_UNKNOWN: u8 = 255;
+
+/// The navigator's dead-reckoned pose, one per decision (56 bytes). The frame is the one
+/// dead reckoning starts in: x ahead and y left of the start pose, heading counter-clockwise.
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::RobotPose")]
+pub struct RobotPose {
+    /// Frame id of the decision this pose was used for.
+    pub frame_id: u64,
+    /// Capture time of that frame, CLOCK_MONOTONIC ns.
+    pub capture_ns: u64,
+    /// Time published, CLOCK_MONOTONIC ns.
+    pub published_ns: u64,
+    /// Position ahead of the start pose, metres.
+    pub x_m: f64,
+    /// Position left of the start pose, metres.
+    pub y_m: f64,
+    /// Heading from the start heading, counter-clockwise, radians.
+    pub heading_rad: f64,
+    /// Distance driven, metres.
+    pub distance_m: f64,
+}
+
+impl Sequenced for RobotPose {
+    fn sequence(&self) -> u64 {
+        self.frame_id
+    }
+}
+
+/// The navigator's map around the robot, a few times a second (16 432 bytes): row-major
+/// cells from the corner `(origin_x_m, origin_y_m)` of the pose frame, x along a row; each
+/// cell 0 (free) to 100 (occupied), or [`NAV_MAP_UNKNOWN`].
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::NavMap")]
+pub struct NavMap {
+    /// Counter of maps from this decision process.
+    pub seq: u64,
+    /// Capture time of the frame the map was last updated from, CLOCK_MONOTONIC ns.
+    pub capture_ns: u64,
+    /// Time published, CLOCK_MONOTONIC ns.
+    pub published_ns: u64,
+    /// x of the first cell's outer corner, metres.
+    pub origin_x_m: f64,
+    /// y of the first cell's outer corner, metres.
+    pub origin_y_m: f64,
+    /// Cell edge, metres.
+    pub cell_m: f32,
+    /// Cells per side ([`NAV_MAP_SIDE`]).
+    pub side: u32,
+    /// Occupancy per cell, row-major (row = y).
+    pub cells: [u8; NAV_MAP_SIDE * NAV_MAP_SIDE],
+}
+
+impl Default for NavMap {
+    fn default() -> Self {
+        Self {
+            seq: 0,
+            capture_ns: 0,
+            published_ns: 0,
+            origin_x_m: 0.0,
+            origin_y_m: 0.0,
+            cell_m: 0.0,
+            side: NAV_MAP_SIDE as u32,
+            cells: [NAV_MAP_UNKNOWN; NAV_MAP_SIDE * NAV_MAP_SIDE],
+        }
+    }
+}
+
+impl Sequenced for NavMap {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -637,6 +716,8 @@ mod tests {
         assert_eq!(size_of::<StageStatusEntry>(), 232);
         assert_eq!(size_of::<SupervisorStatus>(), 56 + 12 * 232);
         assert_eq!(size_of::<ControlRequest>(), 48);
+        assert_eq!(size_of::<RobotPose>(), 56);
+        assert_eq!(size_of::<NavMap>(), 48 + 128 * 128);
     }
 
     #[test]
@@ -656,6 +737,8 @@ mod tests {
         assert_eq!(offset_of!(StageHeartbeat, stage), 88);
         assert_eq!(offset_of!(SimTruth, psc_malformed), 72);
         assert_eq!(offset_of!(SupervisorStatus, stages), 56);
+        assert_eq!(offset_of!(RobotPose, x_m), 24);
+        assert_eq!(offset_of!(NavMap, cells), 48);
     }
 
     #[test]

@@ -16,6 +16,9 @@
 //!   |                                                  decision --decisions--> actuator --+
 //!   |                                                                             |      |
 //!   +--sim/truth--> supervisor, probes, tests          actuator/sent <------------+      |
+//!                                          decision --decision/pose, decision/map--> view, probes
+//!   view: reads frames, disparity, ranges, decisions, actuator/sent, sim/truth, status;
+//!         serves them to Foxglove clients and a web page (WebSocket, loopback by default)
 //!                                                                                        |
 //!   every stage --heartbeat/<stage>--> supervisor --supervisor/status--> hvs status, probe
 //!   hvs restart / hvs stop --supervisor/control--> supervisor                            |
@@ -33,7 +36,9 @@
 //! | `disparity/640x480` | [`DisparityMap640x480`] | stereo-hi | fusion, probe |
 //! | `ranges` | [`RangeReport`] | fusion | decision, probe |
 //! | `decisions` | [`Decision`] | decision | actuator, supervisor, probe |
-//! | `actuator/sent` | [`ActuatorReport`] | actuator (capture in a replay) | decision (dead reckoning), supervisor, probe |
+//! | `actuator/sent` | [`ActuatorReport`] | actuator (capture in a replay) | decision (dead reckoning), supervisor, view, probe |
+//! | `decision/pose` | [`RobotPose`] | decision | view, probe |
+//! | `decision/map` | [`NavMap`] | decision (a few per second) | view, probe |
 //! | `heartbeat/<stage>` | [`StageHeartbeat`] | each stage | supervisor, probe |
 //! | `supervisor/status` | [`SupervisorStatus`] | supervisor | `hvs status`, probe |
 //! | `supervisor/control` | [`ControlRequest`] | `hvs restart`, `hvs stop` | supervisor |
@@ -49,8 +54,8 @@
 use core::marker::PhantomData;
 
 use crate::messages::{
-    ActuatorReport, ControlRequest, Decision, DisparityMap320x240, DisparityMap640x480,
-    RangeReport, SimTruth, StageHeartbeat, StereoFrame320x240, StereoFrame640x480,
+    ActuatorReport, ControlRequest, Decision, DisparityMap320x240, DisparityMap640x480, NavMap,
+    RangeReport, RobotPose, SimTruth, StageHeartbeat, StereoFrame320x240, StereoFrame640x480,
     SupervisorStatus,
 };
 
@@ -141,6 +146,10 @@ pub const DISPARITY_HI: Topic<DisparityMap640x480> = Topic::frames("disparity/64
 pub const RANGES: Topic<RangeReport> = Topic::new("ranges");
 /// Navigation decisions, one per range report.
 pub const DECISIONS: Topic<Decision> = Topic::new("decisions");
+/// The navigator's dead-reckoned pose, one per decision.
+pub const DECISION_POSE: Topic<RobotPose> = Topic::new("decision/pose");
+/// The navigator's map around the robot, a few times a second.
+pub const NAV_MAP: Topic<NavMap> = Topic::new("decision/map");
 /// What the actuator wrote to the serial port.
 pub const ACTUATOR_SENT: Topic<ActuatorReport> = Topic::new("actuator/sent");
 /// Per-stage heartbeats: use [`Topic::stage_service_name`] with the stage name.
@@ -170,11 +179,13 @@ pub enum Stage {
     Decision,
     /// The servo controller link.
     Actuator,
+    /// The live view: a Foxglove WebSocket server and a web page for an operator.
+    View,
 }
 
 impl Stage {
     /// Every stage, in start order.
-    pub const ALL: [Stage; 7] = [
+    pub const ALL: [Stage; 8] = [
         Stage::Sim,
         Stage::Capture,
         Stage::StereoLo,
@@ -182,6 +193,7 @@ impl Stage {
         Stage::Fusion,
         Stage::Decision,
         Stage::Actuator,
+        Stage::View,
     ];
 
     /// The stage's name (`stereo-lo`, ...).
@@ -194,6 +206,7 @@ impl Stage {
             Stage::Fusion => "fusion",
             Stage::Decision => "decision",
             Stage::Actuator => "actuator",
+            Stage::View => "view",
         }
     }
 
@@ -211,15 +224,16 @@ impl Stage {
             Stage::Fusion => "hvs-fusion",
             Stage::Decision => "hvs-decision",
             Stage::Actuator => "hvs-actuator",
+            Stage::View => "hvs-view",
         }
     }
 }
 
 /// The names of the stages the supervisor knows, in start order ([`Stage::ALL`]'s names).
-pub const STAGE_NAMES: [&str; 7] = {
-    let mut names = [""; 7];
+pub const STAGE_NAMES: [&str; 8] = {
+    let mut names = [""; 8];
     let mut i = 0;
-    while i < 7 {
+    while i < 8 {
         names[i] = Stage::ALL[i].name();
         i += 1;
     }
@@ -283,7 +297,7 @@ pub const STAGE_INPUTS: [StageInput; 6] = [
 ];
 
 /// Every fixed topic path with its iceoryx2 payload type name, for discovery by probes.
-pub const ALL_TOPIC_PATHS: [(&str, &str); 12] = [
+pub const ALL_TOPIC_PATHS: [(&str, &str); 14] = [
     (SIM_CAMERA.path, "hvs::StereoFrame640x480"),
     (SIM_GT_DISPARITY.path, "hvs::DisparityMap640x480"),
     (SIM_TRUTH.path, "hvs::SimTruth"),
@@ -294,6 +308,8 @@ pub const ALL_TOPIC_PATHS: [(&str, &str); 12] = [
     (RANGES.path, "hvs::RangeReport"),
     (DECISIONS.path, "hvs::Decision"),
     (ACTUATOR_SENT.path, "hvs::ActuatorReport"),
+    (DECISION_POSE.path, "hvs::RobotPose"),
+    (NAV_MAP.path, "hvs::NavMap"),
     (SUPERVISOR_STATUS.path, "hvs::SupervisorStatus"),
     (SUPERVISOR_CONTROL.path, "hvs::ControlRequest"),
 ];
@@ -318,6 +334,10 @@ pub enum TopicByPath {
     Decision(&'static Topic<Decision>),
     /// `actuator/sent`.
     ActuatorReport(&'static Topic<ActuatorReport>),
+    /// `decision/pose`.
+    RobotPose(&'static Topic<RobotPose>),
+    /// `decision/map`.
+    NavMap(&'static Topic<NavMap>),
     /// `heartbeat/<stage>`: the topic and the stage.
     StageHeartbeat(&'static Topic<StageHeartbeat>, &'static str),
     /// `supervisor/status`.
@@ -341,6 +361,8 @@ pub fn topic_by_path(path: &str) -> Option<TopicByPath> {
         p if p == RANGES.path => T::RangeReport(&RANGES),
         p if p == DECISIONS.path => T::Decision(&DECISIONS),
         p if p == ACTUATOR_SENT.path => T::ActuatorReport(&ACTUATOR_SENT),
+        p if p == DECISION_POSE.path => T::RobotPose(&DECISION_POSE),
+        p if p == NAV_MAP.path => T::NavMap(&NAV_MAP),
         p if p == SUPERVISOR_STATUS.path => T::SupervisorStatus(&SUPERVISOR_STATUS),
         p if p == SUPERVISOR_CONTROL.path => T::ControlRequest(&SUPERVISOR_CONTROL),
         p => {

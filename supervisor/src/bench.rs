@@ -21,6 +21,8 @@ use hvs_shared::messages::{FrameHeader, Sequenced, StereoFrame320x240, StereoFra
 use hvs_shared::topics::{self, Topic};
 use serde::{Deserialize, Serialize};
 
+use crate::bench_view::{ViewLoad, Watcher};
+
 /// Frame sizes the benchmark knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 pub enum FrameSize {
@@ -339,19 +341,113 @@ where
     Ok(())
 }
 
-/// `hvs bench pipeline`: the whole pipeline in its own instance for `duration`, then a table.
-pub fn run_pipeline(config: PathBuf, duration: Duration) -> anyhow::Result<()> {
-    let report = crate::run::run(&crate::run::RunOptions {
-        config_path: config,
-        instance: Some(format!("bench{}", std::process::id())),
-        duration: Some(duration),
-        report: None,
-        replay: None,
-        record: None,
-    })?;
+/// One run's line of the `--view compare` table.
+struct ViewCost {
+    load: ViewLoad,
+    decisions_hz: f64,
+    p50_ms: f64,
+    p99_ms: f64,
+    view_cpu_pct: f64,
+    all_cpu_pct: f64,
+    client_msgs_hz: f64,
+    client_mb_s: f64,
+}
+
+/// `hvs bench pipeline`: the whole pipeline in its own instance for `duration`, then a table;
+/// with `view` a client watches the live view meanwhile (`compare`: none, page, all in turn).
+pub fn run_pipeline(config: PathBuf, duration: Duration, view: ViewLoad) -> anyhow::Result<()> {
+    let loads = match view {
+        ViewLoad::Compare => vec![ViewLoad::None, ViewLoad::Page, ViewLoad::All],
+        one => vec![one],
+    };
+    let mut costs = Vec::new();
+    for (i, load) in loads.into_iter().enumerate() {
+        let instance = format!("bench{}-{i}", std::process::id());
+        let watcher = Watcher::start(&instance, load);
+        let report = crate::run::run(&crate::run::RunOptions {
+            config_path: config.clone(),
+            instance: Some(instance),
+            duration: Some(duration),
+            report: None,
+            replay: None,
+            record: None,
+        })?;
+        let (msgs, bytes) = watcher.map_or((0, 0), Watcher::finish);
+        print_pipeline(&report, load);
+        let secs = report.duration_s.max(1e-3);
+        costs.push(ViewCost {
+            load,
+            decisions_hz: stage_out(&report, "decision") as f64 / secs,
+            p50_ms: report.latency.capture_to_decision.p50_ms,
+            p99_ms: report.latency.capture_to_decision.p99_ms,
+            view_cpu_pct: report
+                .stages
+                .iter()
+                .find(|s| s.stage == "view")
+                .map_or(0.0, |s| s.cpu_pct),
+            all_cpu_pct: report.stages.iter().map(|s| s.cpu_pct).sum(),
+            client_msgs_hz: msgs as f64 / secs,
+            client_mb_s: bytes as f64 / secs / 1e6,
+        });
+    }
+    if costs.len() > 1 {
+        print_view_costs(&costs);
+    }
+    Ok(())
+}
+
+/// The `--view compare` table and its targets.
+fn print_view_costs(costs: &[ViewCost]) {
+    println!();
+    println!("what watching costs (docs/view.md)");
+    println!(
+        "{:<22} {:>11} {:>9} {:>9} {:>10} {:>10} {:>10} {:>8}",
+        "view load", "decisions/s", "p50 ms", "p99 ms", "view cpu%", "all cpu%", "client/s", "MB/s"
+    );
+    for c in costs {
+        println!(
+            "{:<22} {:>11.1} {:>9.2} {:>9.2} {:>10.1} {:>10.1} {:>10.1} {:>8.2}",
+            c.load.label(),
+            c.decisions_hz,
+            c.p50_ms,
+            c.p99_ms,
+            c.view_cpu_pct,
+            c.all_cpu_pct,
+            c.client_msgs_hz,
+            c.client_mb_s
+        );
+    }
+    let verdict = |ok: bool| if ok { "met" } else { "NOT met" };
+    let base = costs.iter().find(|c| c.load == ViewLoad::None);
+    println!("targets");
+    for c in costs.iter().filter(|c| c.load != ViewLoad::None) {
+        if let Some(b) = base {
+            let d = c.p99_ms - b.p99_ms;
+            println!(
+                "  {}: capture->decision p99 within 2 ms of no client: {:+.2} ms  {}",
+                c.load.label(),
+                d,
+                verdict(d <= 2.0)
+            );
+        }
+        println!(
+            "  {}: view stage < 25 % of one core: {:.1} %  {}",
+            c.load.label(),
+            c.view_cpu_pct,
+            verdict(c.view_cpu_pct < 25.0)
+        );
+    }
+}
+
+/// The table of one run.
+fn print_pipeline(report: &crate::report::RunReport, view: ViewLoad) {
     let secs = report.duration_s.max(1e-3);
     println!();
-    println!("pipeline over {:.1} s", report.duration_s);
+    println!(
+        "pipeline over {:.1} s, live view: {}",
+        report.duration_s,
+        view.label()
+    );
     println!(
         "{:<10} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>9}",
         "stage", "in", "out", "out Hz", "drops", "restarts", "cpu %", "rss MiB"
@@ -388,8 +484,7 @@ pub fn run_pipeline(config: PathBuf, duration: Duration) -> anyhow::Result<()> {
             name, v.count, v.p50_ms, v.p99_ms, v.max_ms
         );
     }
-    print_targets(&report, secs);
-    Ok(())
+    print_targets(report, secs);
 }
 
 fn cores() -> usize {

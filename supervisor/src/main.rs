@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_stages;
+mod bench_view;
 mod control;
 mod doctor;
 mod drive;
@@ -307,9 +308,13 @@ enum BenchCommand {
         /// Pipeline configuration (default: config/sim.toml).
         #[arg(long, value_name = "FILE")]
         config: Option<PathBuf>,
-        /// How long to run, seconds.
+        /// How long to run, seconds (each run, with --view compare).
         #[arg(long, default_value_t = 20.0)]
         duration: f64,
+        /// Who watches the live view meanwhile: nobody, the web page's channels, a Foxglove
+        /// client on every channel, or all three in turn with a cost table.
+        #[arg(long, value_enum, default_value = "none")]
+        view: bench_view::ViewLoad,
     },
     /// Soak: the simulated pipeline for a long time with a probe attaching and detaching
     /// every few seconds; prints per-stage memory and descriptors at the start and the end,
@@ -687,9 +692,13 @@ fn main() -> ExitCode {
                     warm_up: seconds(warm_up, "--warm-up")?,
                 })
             })(),
-            BenchCommand::Pipeline { config, duration } => (|| {
+            BenchCommand::Pipeline {
+                config,
+                duration,
+                view,
+            } => (|| {
                 let config = resolve_config(config)?;
-                bench::run_pipeline(config, seconds(duration, "--duration")?)
+                bench::run_pipeline(config, seconds(duration, "--duration")?, view)
             })(),
             BenchCommand::IpcReceiver {
                 instance,

@@ -229,12 +229,22 @@ pub fn run(command: ProbeCommand) -> anyhow::Result<()> {
             create_topics,
             ready_file,
         } => {
+            // The calibration and camera transform come from the config (--config, else the
+            // default); without one the recording simply lacks them.
+            let camera = match snapshot_config(&target) {
+                Ok(c) => Some(c.camera),
+                Err(e) => {
+                    tracing::warn!("no camera calibration in the recording: {e:#}");
+                    None
+                }
+            };
             let opts = RecordOptions {
                 out: file,
                 topics,
                 duration: duration_s.map(|d| seconds(d, "--duration")).transpose()?,
                 create_topics,
                 ready_file,
+                camera,
             };
             let probe = Probe::attach(&target.instance()?)?;
             let summary = record::record(&probe, &opts, &mut std::io::stderr())?;

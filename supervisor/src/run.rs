@@ -275,7 +275,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     let recorder = opts
         .record
         .as_deref()
-        .map(|out| Recorder::start(&sup.instance, out))
+        .map(|out| Recorder::start(&sup.instance, out, &sup.config_path))
         .transpose()?;
     for i in 0..sup.slots.len() {
         if sup.slots[i].state == StageState::Stopped {

@@ -71,6 +71,13 @@ pub fn write_config(
             repo_root().join("config/maps/maze.txt").display()
         ),
     );
+    // Live view on free ports (shown in its status note): tests never take 8765/8766.
+    text = text
+        .replace("bind = \"127.0.0.1:8765\"", "bind = \"127.0.0.1:0\"")
+        .replace(
+            "http_bind = \"127.0.0.1:8766\"",
+            "http_bind = \"127.0.0.1:0\"",
+        );
     for (from, to) in base_overrides {
         assert!(text.contains(from), "config/sim.toml has no line {from:?}");
         text = text.replace(from, to);
@@ -254,8 +261,12 @@ impl Pipeline {
         self.wait_status("every stage running with output", timeout, |s| {
             stages(s).iter().all(|st| {
                 let state = st["state"].as_str().unwrap_or("");
+                // The view sends only to clients: it is ready once it serves.
+                let serving = st["stage"] == "view"
+                    && st["note"].as_str().is_some_and(|n| n.contains("ws :"));
                 state == "disabled"
-                    || (state == "running" && st["frames_out"].as_u64().unwrap_or(0) > 0)
+                    || (state == "running"
+                        && (serving || st["frames_out"].as_u64().unwrap_or(0) > 0))
             })
         })
     }
@@ -333,3 +344,28 @@ pub fn signal_pid(pid: u32, signal: Signal) {
 pub mod psc_peer;
 
 pub use hvs_runtime::ipc::iceoryx_files;
+
+/// The ports the view stage serves on (WebSocket, web page), read from its status note once
+/// it serves; panics with the logs after `timeout`.
+pub fn view_ports(p: &Pipeline, timeout: Duration) -> (u16, u16) {
+    let status = p.wait_status("the view serving", timeout, |s| {
+        stages(s).iter().any(|st| {
+            st["stage"] == "view"
+                && st["note"]
+                    .as_str()
+                    .is_some_and(|n| n.contains("ws :") && n.contains("http :"))
+        })
+    });
+    let note = stage(&status, "view")["note"]
+        .as_str()
+        .unwrap_or("")
+        .to_string();
+    let port_after = |tag: &str| -> u16 {
+        note.split(tag)
+            .nth(1)
+            .and_then(|rest| rest.split_whitespace().next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("no port after {tag:?} in the view's note {note:?}"))
+    };
+    (port_after("ws :"), port_after("http :"))
+}

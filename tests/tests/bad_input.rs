@@ -519,6 +519,10 @@ fn every_bad_input_has_a_clear_message() {
             "the actuator without a device",
             &with_line(&base, "device = \"sim\"", "device = \"\""),
         ),
+        config_row(
+            "a live view address without a port",
+            &with_line(&base, "bind = \"127.0.0.1:8765\"", "bind = \"localhost\""),
+        ),
     ];
     let dir = tempfile::tempdir().expect("tempdir");
     rows.extend(file_rows(dir.path()));

@@ -156,7 +156,10 @@ fn slow_and_killed_probes_do_not_slow_the_pipeline() {
     );
     let list = list_json(&p.instance);
     let lo = topic_entry(&list, "frames/320x240");
-    assert_eq!(lo["subscribers"], 2, "stereo-lo and fusion only: {lo}");
+    assert_eq!(
+        lo["subscribers"], 3,
+        "stereo-lo, fusion and the view only: {lo}"
+    );
     let hi = topic_entry(&list, "frames/640x480");
     assert_eq!(
         hi["subscribers"], 3,

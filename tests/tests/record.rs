@@ -36,6 +36,18 @@ fn read_recording(path: &Path) -> (BTreeMap<String, u64>, BTreeMap<String, Strin
             );
             assert!(v["hvs_header"]["frame_id"].as_u64().is_some(), "{v}");
         }
+        if let Some(schema) = message.channel.schema.as_ref()
+            && schema.name.starts_with("hvs.")
+        {
+            // The live view's schemas: every field named with its type, and the messages
+            // follow them.
+            let js: Value = serde_json::from_slice(&schema.data).expect("JSON schema");
+            let v: Value = serde_json::from_slice(&message.data).expect("JSON message");
+            hvs_probe::schemas::conforms(&v, &js).unwrap_or_else(|e| panic!("{topic}: {e}"));
+        }
+        // One sequence per channel: 1, 2, 3... with no gaps.
+        let n = counts.get(&topic).copied().unwrap_or(0);
+        assert_eq!(u64::from(message.sequence), n + 1, "{topic}: sequence");
         *counts.entry(topic).or_insert(0) += 1;
     }
     let meta = hvs_probe::record::read_metadata(&bytes).expect("hvs.recording metadata");
@@ -53,6 +65,8 @@ fn a_recording_holds_every_topic_and_its_counts() {
         "record",
         "--instance",
         &p.instance,
+        "--config",
+        p.config.to_str().expect("utf-8 path"),
         "--out",
         file.to_str().expect("utf-8 path"),
         "--duration",
@@ -69,6 +83,7 @@ fn a_recording_holds_every_topic_and_its_counts() {
         "ranges",
         "decisions",
         "actuator/sent",
+        "decision/pose",
     ] {
         let written = summary["topics"][topic]["written"]
             .as_u64()
@@ -91,6 +106,20 @@ fn a_recording_holds_every_topic_and_its_counts() {
             .as_u64()
             .unwrap_or(0);
     assert!(lo >= 30, "{summary}");
+    // Calibration once a second, and the transforms of every pose.
+    assert!(
+        counts.get("/camera/calibration").copied().unwrap_or(0) >= 2,
+        "{counts:?}"
+    );
+    assert!(
+        counts.contains_key("/camera/calibration/640x480"),
+        "{counts:?}"
+    );
+    assert_eq!(
+        counts.get("/tf"),
+        counts.get("/decision/pose"),
+        "{counts:?}"
+    );
     assert!(summary["cut_short"].is_null(), "{summary}");
 }
 

@@ -30,7 +30,7 @@ fn decisions(path: &Path) -> (BTreeMap<u64, Value>, usize) {
     }
     let turns = out
         .values()
-        .filter(|v| v["command"] == "LEFT" || v["command"] == "RIGHT")
+        .filter(|v| v["command_label"] == "LEFT" || v["command_label"] == "RIGHT")
         .count();
     (out, turns)
 }

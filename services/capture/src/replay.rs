@@ -125,8 +125,8 @@ struct RangesJson {
 #[derive(Deserialize)]
 struct SentJson {
     seq: u64,
-    reason: String,
-    command: String,
+    reason: CodeOrLabel,
+    command: CodeOrLabel,
     left_pw: u16,
     right_pw: u16,
     decision_frame_id: u64,
@@ -142,6 +142,15 @@ struct SentJson {
     ramp: Option<u8>,
 }
 
+/// A code as recorded: a number with its label beside it (current recordings), or the label
+/// alone (recordings made before the recordings carried numeric codes).
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum CodeOrLabel {
+    Code(u32),
+    Label(String),
+}
+
 impl SentJson {
     fn report(&self) -> Result<ActuatorReport, String> {
         let mut bytes = [0u8; 16];
@@ -152,14 +161,16 @@ impl SentJson {
         for (b, h) in bytes.iter_mut().zip(&hex) {
             *b = u8::from_str_radix(h, 16).map_err(|_| format!("bytes_hex {h:?} is not hex"))?;
         }
-        let command = (0..8)
-            .map(MotionCommand::from_code)
-            .find(|c| c.label() == self.command)
-            .ok_or_else(|| format!("unknown command {:?}", self.command))?;
-        let reason = SendReason::ALL
-            .into_iter()
-            .find(|r| r.label() == self.reason)
-            .ok_or_else(|| format!("unknown reason {:?}", self.reason))?;
+        let command = match &self.command {
+            CodeOrLabel::Code(c) => MotionCommand::try_from_code(*c),
+            CodeOrLabel::Label(l) => MotionCommand::from_label(l),
+        }
+        .ok_or_else(|| format!("unknown command {:?}", self.command))?;
+        let reason = match &self.reason {
+            CodeOrLabel::Code(c) => SendReason::try_from_code(*c),
+            CodeOrLabel::Label(l) => SendReason::from_label(l),
+        }
+        .ok_or_else(|| format!("unknown reason {:?}", self.reason))?;
         Ok(ActuatorReport {
             seq: self.seq,
             sent_ns: self.sent_ns,

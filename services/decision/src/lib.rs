@@ -21,6 +21,7 @@
 
 pub mod explore;
 pub mod local_map;
+pub mod nav_map;
 pub mod odometry;
 pub mod ordering;
 

@@ -3,11 +3,16 @@
 
 use std::process::ExitCode;
 
+use hvs_decision::nav_map::{fill_map, pose_message};
 use hvs_decision::ordering::{SentQueue, apply_sent, decision_message};
 use hvs_decision::{Navigator, Policy};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
+use hvs_shared::messages::NavMap;
 use hvs_shared::topics::{self, Stage};
+
+/// Period of the `decision/map` snapshots, ns.
+const MAP_PERIOD_NS: u64 = 500_000_000;
 
 fn main() -> ExitCode {
     run_stage(Stage::Decision, run)
@@ -18,6 +23,11 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     // What the actuator really sent: dead reckoning for the turns and the visit memory.
     let sent = rt.node.subscriber(&topics::ACTUATOR_SENT, 16)?;
     let mut decisions = rt.node.publisher(&topics::DECISIONS)?;
+    // For observers (the live view, probes): the pose every decision, the map twice a second.
+    let mut poses = rt.node.publisher(&topics::DECISION_POSE)?;
+    let mut maps = rt.node.publisher(&topics::NAV_MAP)?;
+    let mut map = Box::<NavMap>::default();
+    let mut map_due_ns = 0u64;
     let cfg = rt.config.decision.clone();
     let mut nav = Navigator::new(&cfg, &rt.config.robot, &rt.config.actuator.pulses)
         .with_camera_forward_m(rt.config.camera.forward_m)
@@ -69,6 +79,22 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             match decisions.publish_copy(&decision) {
                 Ok(_) => rt.count_out(monotonic_ns() - received_ns),
                 Err(e) => rt.report_publish_error(&e),
+            }
+            let now_ns = monotonic_ns();
+            if let Err(e) =
+                poses.publish_copy(&pose_message(&nav, r.frame_id, r.capture_ns, now_ns))
+            {
+                rt.report_publish_error(&e);
+            }
+            if now_ns >= map_due_ns {
+                map_due_ns = now_ns + MAP_PERIOD_NS;
+                fill_map(&nav, r.capture_ns, &mut map);
+                map.seq += 1;
+                map.capture_ns = r.capture_ns;
+                map.published_ns = monotonic_ns();
+                if let Err(e) = maps.publish_copy(&map) {
+                    rt.report_publish_error(&e);
+                }
             }
         }
         Ok(LoopControl::Continue)

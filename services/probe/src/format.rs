@@ -3,10 +3,10 @@
 
 use hvs_shared::messages::{
     ActuatorReport, ControlCommand, ControlRequest, Decision, DisparityHeader, DisparityMap320x240,
-    DisparityMap640x480, FrameHeader, FrameSource, IntersectionType, MotionCommand, RangeReport,
-    RangeSource, RangeWindow, RowAlignState, SendReason, SimTruth, StageHealth, StageHeartbeat,
-    StageState, StereoAlgorithm, StereoFrame320x240, StereoFrame640x480, SupervisorStatus,
-    decode_name,
+    DisparityMap640x480, FrameHeader, FrameSource, IntersectionType, MotionCommand, NavMap,
+    RangeReport, RangeSource, RangeWindow, RobotPose, RowAlignState, SendReason, SimTruth,
+    StageHealth, StageHeartbeat, StageState, StereoAlgorithm, StereoFrame320x240,
+    StereoFrame640x480, SupervisorStatus, decode_name,
 };
 use serde_json::{Value, json};
 
@@ -313,6 +313,72 @@ impl Describe for ActuatorReport {
             "capture_to_sent_ms": span_ms(self.decision_capture_ns, self.sent_ns),
             "bytes_hex": hex_bytes(sent_bytes(self)),
             "bytes_text": escape_bytes(sent_bytes(self)),
+        })
+    }
+}
+
+impl Describe for RobotPose {
+    fn stamp_ns(&self) -> Option<u64> {
+        stamp(self.published_ns)
+    }
+
+    fn describe_text(&self) -> String {
+        format!(
+            "pose frame {} x {:.3} y {:.3} m heading {:.1} deg driven {:.2} m",
+            self.frame_id,
+            self.x_m,
+            self.y_m,
+            self.heading_rad.to_degrees(),
+            self.distance_m
+        )
+    }
+
+    fn describe_json(&self) -> Value {
+        json!({
+            "frame_id": self.frame_id,
+            "capture_ns": self.capture_ns,
+            "published_ns": self.published_ns,
+            "x_m": self.x_m,
+            "y_m": self.y_m,
+            "heading_rad": self.heading_rad,
+            "distance_m": self.distance_m,
+        })
+    }
+}
+
+impl Describe for NavMap {
+    fn stamp_ns(&self) -> Option<u64> {
+        stamp(self.published_ns)
+    }
+
+    fn describe_text(&self) -> String {
+        let (free, occupied) = self.cells.iter().fold((0, 0), |(f, o), &c| match c {
+            0..=49 => (f + 1, o),
+            50..=100 => (f, o + 1),
+            _ => (f, o),
+        });
+        format!(
+            "map #{} {}x{} cells of {:.2} m from ({:.2}, {:.2}) m: {free} free, {occupied} occupied",
+            self.seq, self.side, self.side, self.cell_m, self.origin_x_m, self.origin_y_m
+        )
+    }
+
+    fn describe_json(&self) -> Value {
+        let (free, occupied) = self.cells.iter().fold((0u32, 0u32), |(f, o), &c| match c {
+            0..=49 => (f + 1, o),
+            50..=100 => (f, o + 1),
+            _ => (f, o),
+        });
+        json!({
+            "seq": self.seq,
+            "capture_ns": self.capture_ns,
+            "published_ns": self.published_ns,
+            "origin_x_m": self.origin_x_m,
+            "origin_y_m": self.origin_y_m,
+            "cell_m": self.cell_m,
+            "side": self.side,
+            "free_cells": free,
+            "occupied_cells": occupied,
         })
     }
 }

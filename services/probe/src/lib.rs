@@ -10,6 +10,7 @@
 //! - [`format`]: text and JSON of every message type,
 //! - [`render`]: stereo pairs, colour-mapped disparity with a legend in metres, fused maps,
 //! - [`top`]: the table of `hvs probe top`,
+//! - [`schemas`]: the JSON messages and schemas of the live view and the recordings,
 //! - [`attach`]: the IPC glue that attaches and runs each command.
 
 pub mod attach;
@@ -17,6 +18,7 @@ pub mod format;
 pub mod rate;
 pub mod record;
 pub mod render;
+pub mod schemas;
 pub mod top;
 
 pub use attach::{

@@ -25,21 +25,30 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::config::CameraConfig;
 use hvs_runtime::error_chain;
 use hvs_runtime::ipc::{ReceiveError, TopicSubscriber};
-use hvs_shared::messages::{FrameHeader, StereoFrame320x240, StereoFrame640x480, StereoPayload};
+use hvs_shared::messages::{
+    ActuatorReport, Decision, FrameHeader, RangeReport, RobotPose, StereoFrame320x240,
+    StereoFrame640x480, StereoPayload,
+};
 use hvs_shared::topics::{Topic, TopicByPath};
 use serde_json::{Value, json};
 
 use crate::attach::{AttachError, Payload, Probe, resolve_topic};
+use crate::schemas::{
+    CAMERA_CALIBRATION_SCHEMA, CAMERA_FRAME, FRAME_TRANSFORMS_SCHEMA, FoxgloveJson, Pinhole,
+    calibration_json, pose_transforms, transforms_json,
+};
 
 /// Topics recorded when none are named.
-pub const DEFAULT_TOPICS: [&str; 5] = [
+pub const DEFAULT_TOPICS: [&str; 6] = [
     "frames/320x240",
     "frames/640x480",
     "ranges",
     "decisions",
     "actuator/sent",
+    "decision/pose",
 ];
 
 /// Name of the metadata record with the counts.
@@ -65,6 +74,9 @@ pub struct RecordOptions {
     pub create_topics: bool,
     /// Created once every topic is subscribed (`hvs run --record` waits for it).
     pub ready_file: Option<PathBuf>,
+    /// The camera, for the calibration and camera transform written beside the images
+    /// (`None`: neither is recorded).
+    pub camera: Option<CameraConfig>,
 }
 
 /// What a recording holds, per topic.
@@ -180,6 +192,58 @@ pub trait Recordable: Payload {
     fn stereo(&self) -> Option<(&FrameHeader, &[u8], &[u8])> {
         None
     }
+    /// Schema name and JSON schema of the message channel (not for stereo frames).
+    fn schema() -> (&'static str, Value) {
+        ("hvs.Message", json!({"type": "object"}))
+    }
+    /// The message as recorded (not for stereo frames).
+    fn record_json(&self) -> Value {
+        self.describe_json()
+    }
+    /// Frame transforms recorded on `/tf` beside the message (poses only).
+    fn transforms(&self, _camera: &CameraConfig) -> Option<Value> {
+        None
+    }
+}
+
+/// The live view's JSON and schema (`crate::schemas`), so that both look the same.
+macro_rules! recordable_as_foxglove_json {
+    ($($t:ty),+) => {$(
+        impl Recordable for $t {
+            fn schema() -> (&'static str, Value) {
+                (<$t as FoxgloveJson>::SCHEMA_NAME, <$t as FoxgloveJson>::json_schema())
+            }
+            fn record_json(&self) -> Value {
+                self.to_foxglove_json()
+            }
+            fn transforms(&self, camera: &CameraConfig) -> Option<Value> {
+                pose_transforms_json(self, camera)
+            }
+        }
+    )+};
+}
+
+/// Only a pose has transforms.
+trait MaybePose {
+    fn pose(&self) -> Option<&RobotPose> {
+        None
+    }
+}
+impl MaybePose for RangeReport {}
+impl MaybePose for Decision {}
+impl MaybePose for ActuatorReport {}
+impl MaybePose for RobotPose {
+    fn pose(&self) -> Option<&RobotPose> {
+        Some(self)
+    }
+}
+
+fn pose_transforms_json<T: MaybePose>(m: &T, camera: &CameraConfig) -> Option<Value> {
+    let pose = m.pose()?;
+    Some(transforms_json(
+        &pose_transforms(pose, camera),
+        pose.published_ns,
+    ))
 }
 
 impl Recordable for StereoFrame320x240 {
@@ -196,9 +260,7 @@ impl Recordable for StereoFrame640x480 {
     }
 }
 
-impl Recordable for hvs_shared::messages::RangeReport {}
-impl Recordable for hvs_shared::messages::Decision {}
-impl Recordable for hvs_shared::messages::ActuatorReport {}
+recordable_as_foxglove_json!(RangeReport, Decision, ActuatorReport, RobotPose);
 
 /// One recorded topic: its subscriber and channel ids.
 trait Source {
@@ -217,6 +279,8 @@ struct TopicSource<T: Recordable> {
     path: String,
     sub: TopicSubscriber<T>,
     channels: Vec<u16>,
+    /// `/tf` and the camera, for poses.
+    transforms: Option<(u16, CameraConfig)>,
 }
 
 impl<T: Recordable> Source for TopicSource<T> {
@@ -242,8 +306,14 @@ impl<T: Recordable> Source for TopicSource<T> {
                 }
                 None => {
                     let log_ns = sink.wall_ns(p.stamp_ns().unwrap_or_else(monotonic_ns));
-                    let msg = p.describe_json().to_string();
+                    let msg = p.record_json().to_string();
                     sink.write(self.channels[0], log_ns, msg.as_bytes())?;
+                    if let Some((channel, camera)) = &self.transforms
+                        && let Some(mut tf) = p.transforms(camera)
+                    {
+                        wall_stamps(&mut tf, log_ns);
+                        sink.write(*channel, log_ns, tf.to_string().as_bytes())?;
+                    }
                 }
             }
             n += 1;
@@ -261,7 +331,7 @@ fn raw_image(header: &FrameHeader, side: &str, pixels: &[u8], log_ns: u64, hvs: 
     use base64::Engine;
     json!({
         "timestamp": {"sec": log_ns / 1_000_000_000, "nsec": log_ns % 1_000_000_000},
-        "frame_id": side,
+        "frame_id": if side == "left" { CAMERA_FRAME.to_string() } else { format!("{CAMERA_FRAME}_{side}") },
         "width": header.width,
         "height": header.height,
         "encoding": "mono8",
@@ -273,10 +343,18 @@ fn raw_image(header: &FrameHeader, side: &str, pixels: &[u8], log_ns: u64, hvs: 
     .into_bytes()
 }
 
+/// Sets every `timestamp` of a `foxglove.FrameTransforms` to the wall-clock log time.
+fn wall_stamps(tf: &mut Value, log_ns: u64) {
+    for t in tf["transforms"].as_array_mut().into_iter().flatten() {
+        t["timestamp"] = crate::schemas::timestamp(log_ns);
+    }
+}
+
 /// The MCAP writer and the bookkeeping for a clean end.
 struct Sink {
     writer: mcap::Writer<CountingFile>,
-    sequence: u32,
+    /// The last sequence number per channel (each channel counts its own messages).
+    sequences: BTreeMap<u16, u32>,
     /// CLOCK_REALTIME minus CLOCK_MONOTONIC at the start, ns.
     wall_offset_ns: i128,
 }
@@ -287,10 +365,11 @@ impl Sink {
     }
 
     fn write(&mut self, channel: u16, log_ns: u64, data: &[u8]) -> Result<(), Drained> {
-        self.sequence = self.sequence.wrapping_add(1);
+        let sequence = self.sequences.entry(channel).or_insert(0);
+        *sequence = sequence.wrapping_add(1);
         let header = mcap::records::MessageHeader {
             channel_id: channel,
-            sequence: self.sequence,
+            sequence: *sequence,
             log_time: log_ns,
             publish_time: log_ns,
         };
@@ -308,6 +387,41 @@ fn wall_offset_ns() -> i128 {
     wall - monotonic_ns() as i128
 }
 
+/// Topic of the frame transforms (world -> robot -> camera) beside `decision/pose`.
+pub const TRANSFORMS_TOPIC: &str = "/tf";
+/// Topic of the left camera's calibration at 320x240 (`/camera/calibration/640x480` at
+/// 640x480).
+pub const CALIBRATION_TOPIC: &str = "/camera/calibration";
+
+/// Adds the calibration channel of each recorded image size.
+fn add_calibration(
+    writer: &mut mcap::Writer<CountingFile>,
+    camera: &CameraConfig,
+    paths: &[String],
+) -> Result<Vec<(u16, Pinhole)>, mcap::McapError> {
+    let schema = writer.add_schema(
+        "foxglove.CameraCalibration",
+        "jsonschema",
+        CAMERA_CALIBRATION_SCHEMA.as_bytes(),
+    )?;
+    let mut out = Vec::new();
+    for (path, topic, w, h) in [
+        ("frames/320x240", CALIBRATION_TOPIC.to_string(), 320, 240),
+        (
+            "frames/640x480",
+            format!("{CALIBRATION_TOPIC}/640x480"),
+            640,
+            480,
+        ),
+    ] {
+        if paths.iter().any(|p| p == path) {
+            let id = writer.add_channel(schema, &topic, "json", &BTreeMap::new())?;
+            out.push((id, Pinhole::of(camera, w, h)));
+        }
+    }
+    Ok(out)
+}
+
 /// Subscribes to one topic and adds its channels.
 fn open_source<T: Recordable>(
     topic: &'static Topic<T>,
@@ -315,6 +429,7 @@ fn open_source<T: Recordable>(
     path: &str,
     writer: &mut mcap::Writer<CountingFile>,
     create_topics: bool,
+    camera: Option<&CameraConfig>,
     create: &dyn Fn(String) -> RecordError,
 ) -> Result<Box<dyn Source>, RecordError> {
     let sub = if create_topics {
@@ -349,9 +464,9 @@ fn open_source<T: Recordable>(
         }
         ids
     } else {
-        let name = format!("hvs.{}", crate::attach::short_type_name::<T>());
+        let (name, json_schema) = T::schema();
         let schema = writer
-            .add_schema(&name, "jsonschema", br#"{"type":"object"}"#)
+            .add_schema(name, "jsonschema", json_schema.to_string().as_bytes())
             .map_err(mcap_err)?;
         vec![
             writer
@@ -359,10 +474,27 @@ fn open_source<T: Recordable>(
                 .map_err(mcap_err)?,
         ]
     };
+    let transforms = match camera {
+        Some(camera) if path == hvs_shared::topics::DECISION_POSE.path => {
+            let schema = writer
+                .add_schema(
+                    "foxglove.FrameTransforms",
+                    "jsonschema",
+                    FRAME_TRANSFORMS_SCHEMA.as_bytes(),
+                )
+                .map_err(mcap_err)?;
+            let id = writer
+                .add_channel(schema, TRANSFORMS_TOPIC, "json", &no_meta)
+                .map_err(mcap_err)?;
+            Some((id, camera.clone()))
+        }
+        _ => None,
+    };
     Ok(Box::new(TopicSource {
         path: path.to_string(),
         sub,
         channels,
+        transforms,
     }))
 }
 
@@ -414,28 +546,40 @@ pub fn record(
             pos: Arc::clone(&pos),
         })
         .map_err(|e| create(e.to_string()))?;
+    let camera = opts.camera.as_ref();
     let mut sources = Vec::new();
     for (path, by) in resolved {
+        // Every recordable topic is opened the same way; only its payload type differs.
+        macro_rules! open {
+            ($t:expr) => {
+                open_source(
+                    $t,
+                    probe,
+                    path,
+                    &mut writer,
+                    opts.create_topics,
+                    camera,
+                    &create,
+                )
+            };
+        }
         let source = match by {
-            TopicByPath::StereoFrame320x240(t) => {
-                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
-            }
-            TopicByPath::StereoFrame640x480(t) => {
-                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
-            }
-            TopicByPath::RangeReport(t) => {
-                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
-            }
-            TopicByPath::Decision(t) => {
-                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
-            }
-            TopicByPath::ActuatorReport(t) => {
-                open_source(t, probe, path, &mut writer, opts.create_topics, &create)
-            }
+            TopicByPath::StereoFrame320x240(t) => open!(t),
+            TopicByPath::StereoFrame640x480(t) => open!(t),
+            TopicByPath::RangeReport(t) => open!(t),
+            TopicByPath::Decision(t) => open!(t),
+            TopicByPath::ActuatorReport(t) => open!(t),
+            TopicByPath::RobotPose(t) => open!(t),
             _ => Err(not_recordable(path)),
         };
         sources.push(source?);
     }
+    let calibration = match camera {
+        Some(camera) => {
+            Some(add_calibration(&mut writer, camera, &paths).map_err(|e| create(e.to_string()))?)
+        }
+        None => None,
+    };
     // The header and channels on disk first: a recording cut short keeps them.
     writer.flush().map_err(|e| create(e.to_string()))?;
     if let Some(ready) = &opts.ready_file {
@@ -449,7 +593,7 @@ pub fn record(
     let mut good_len = pos.load(Ordering::Relaxed);
     let mut sink = Sink {
         writer,
-        sequence: 0,
+        sequences: BTreeMap::new(),
         wall_offset_ns: wall_offset_ns(),
     };
     let mut counts: BTreeMap<String, TopicCounts> = paths
@@ -459,6 +603,7 @@ pub fn record(
     let mut flushed = counts.clone();
     let start = Instant::now();
     let mut last_flush = Instant::now();
+    let mut last_calibration: Option<Instant> = None;
     let mut cut_short: Option<String> = None;
     let mut interrupted = false;
     'record: loop {
@@ -484,6 +629,23 @@ pub fn record(
                 }
                 Err(Drained::Write(e)) => {
                     cut_short = Some(e);
+                    break 'record;
+                }
+            }
+        }
+        if let Some(cals) = &calibration
+            && last_calibration.is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
+        {
+            // Once a second, so that a player that seeks finds one nearby.
+            last_calibration = Some(Instant::now());
+            let log_ns = sink.wall_ns(monotonic_ns());
+            for (channel, pinhole) in cals {
+                let msg = calibration_json(pinhole, log_ns).to_string();
+                if let Err(e) = sink.write(*channel, log_ns, msg.as_bytes()) {
+                    cut_short = Some(match e {
+                        Drained::Write(e) => e,
+                        Drained::Receive(e) => error_chain(&e),
+                    });
                     break 'record;
                 }
             }

@@ -32,12 +32,15 @@ pub(super) struct Recorder {
 
 impl Recorder {
     /// Starts the recorder and waits until it has subscribed to every topic.
-    pub(super) fn start(instance: &str, out: &Path) -> anyhow::Result<Self> {
+    pub(super) fn start(instance: &str, out: &Path, config: &Path) -> anyhow::Result<Self> {
         let exe = std::env::current_exe().context("cannot locate the hvs executable")?;
         let ready = run_dir(instance).join("recorder.ready");
         let _ = std::fs::remove_file(&ready);
         let mut cmd = std::process::Command::new(exe);
+        // The config gives the recording its camera calibration and transforms.
         cmd.args(["probe", "record", "--instance", instance, "--create-topics"])
+            .arg("--config")
+            .arg(config)
             .arg("--out")
             .arg(out)
             .arg("--ready-file")

@@ -389,6 +389,20 @@ impl Navigator {
         self.odometry.pose()
     }
 
+    /// Distance driven by dead reckoning, metres.
+    pub fn distance_m(&self) -> f64 {
+        self.odometry.distance_m()
+    }
+
+    /// The state of a point of the pose frame in the map the policy navigates by: the
+    /// explorer's occupancy grid, or the local map of the other policies.
+    pub fn map_state(&self, x_m: f64, y_m: f64, now_ns: u64) -> crate::local_map::CellState {
+        match &self.explorer {
+            Some(e) => e.grid().state_at(x_m, y_m),
+            None => self.map.state(x_m, y_m, now_ns),
+        }
+    }
+
     /// Decides from one range report's windows and obstacle scan at `now_ns` (a scan with no
     /// data leaves the local map as it is).
     pub fn decide(

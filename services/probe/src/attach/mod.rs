@@ -41,6 +41,8 @@ macro_rules! dispatch {
             TopicByPath::RangeReport(t) => $f(t, None, $($arg),*),
             TopicByPath::Decision(t) => $f(t, None, $($arg),*),
             TopicByPath::ActuatorReport(t) => $f(t, None, $($arg),*),
+            TopicByPath::RobotPose(t) => $f(t, None, $($arg),*),
+            TopicByPath::NavMap(t) => $f(t, None, $($arg),*),
             TopicByPath::StageHeartbeat(t, stage) => $f(t, Some(stage), $($arg),*),
             TopicByPath::SupervisorStatus(t) => $f(t, None, $($arg),*),
             TopicByPath::ControlRequest(t) => $f(t, None, $($arg),*),

@@ -21,6 +21,7 @@ mod sim;
 mod stages;
 mod stereo;
 mod supervisor;
+mod view;
 
 pub use actuator::*;
 pub use camera::*;
@@ -33,6 +34,7 @@ pub use sim::*;
 pub use stages::*;
 pub use stereo::*;
 pub use supervisor::*;
+pub use view::*;
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -129,6 +131,9 @@ pub struct HvsConfig {
     /// The robot's body (footprint, drive), shared by the simulator and the navigator.
     #[serde(default)]
     pub robot: RobotConfig,
+    /// The live view (Foxglove WebSocket server and web page).
+    #[serde(default)]
+    pub view: ViewConfig,
     /// Per-stage process settings, keyed by stage name (see [`STAGE_NAMES`]).
     #[serde(default)]
     pub stages: BTreeMap<String, StageOverride>,
@@ -192,6 +197,7 @@ impl HvsConfig {
             ("actuator", self.actuator.validate()),
             ("sim", self.sim.validate()),
             ("robot", self.robot.validate()),
+            ("view", self.view.validate()),
         ];
         // The `[stereo.*]` sections are checked by the matchers' own rules
         // (`hvs_stereo::validate_section`, run by `hvs check`, `hvs run` and `hvs doctor`).

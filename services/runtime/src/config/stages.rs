@@ -223,9 +223,12 @@ impl HvsConfig {
             .map(|stage| {
                 let name = stage.name();
                 let o = self.stages.get(name).cloned().unwrap_or_default();
-                let nice = o
-                    .nice
-                    .unwrap_or(if stage == Stage::StereoHi { 10 } else { 0 });
+                // The 640x480 worker and the live view only use what the fast path leaves.
+                let nice = o.nice.unwrap_or(match stage {
+                    Stage::StereoHi => 10,
+                    Stage::View => 5,
+                    _ => 0,
+                });
                 StageSpec {
                     stage,
                     name: name.to_string(),
