@@ -197,6 +197,39 @@ impl SendReason {
 }
 
 code_enum! {
+    /// The navigation policy that made a decision (`Decision.policy`; the labels are the
+    /// config's `decision.policy` values).
+    pub enum NavPolicy {
+        /// The reference system: crisp thresholds, the navigation table.
+        Reference = 1 => "reference",
+        /// Fuzzy walls, hysteresis, dead-reckoned turns and visit memory.
+        Fuzzy = 2 => "fuzzy",
+        /// Kostavelis et al.'s mean estimation.
+        MeanEstimation = 3 => "mean-estimation",
+        /// Threshold estimation.
+        ThresholdEstimation = 4 => "threshold-estimation",
+        /// Frontier exploration on an occupancy grid.
+        Explore = 5 => "explore",
+    }
+}
+
+code_enum! {
+    /// Level of a stage's log line ([`LogLine`](crate::messages::LogLine)).
+    pub enum LogLevel {
+        /// Tracing detail.
+        Trace = 1 => "TRACE",
+        /// Debugging detail.
+        Debug = 2 => "DEBUG",
+        /// Normal operation.
+        Info = 3 => "INFO",
+        /// Something is off but the stage goes on.
+        Warn = 4 => "WARN",
+        /// Something failed.
+        Error = 5 => "ERROR",
+    }
+}
+
+code_enum! {
     /// Liveness state a stage reports about itself.
     pub enum StageHealth {
         /// Opening devices and services.

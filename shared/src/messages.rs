@@ -14,8 +14,8 @@ use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
 
 pub use crate::codes::{
-    ControlCommand, FrameSource, IntersectionType, MotionCommand, RangeSource, RowAlignState,
-    SendReason, StageHealth, StageState, StereoAlgorithm,
+    ControlCommand, FrameSource, IntersectionType, LogLevel, MotionCommand, NavPolicy, RangeSource,
+    RowAlignState, SendReason, StageHealth, StageState, StereoAlgorithm,
 };
 
 /// Width of the fast-path (low-resolution) images in pixels.
@@ -386,7 +386,7 @@ pub struct Decision {
     pub turn_angle_deg: f32,
     /// PSC ramp value to use with the command (0..63).
     pub ramp: u32,
-    /// Decision policy code (see the decision stage).
+    /// [`NavPolicy`] code.
     pub policy: u32,
     /// Reserved, zero.
     pub reserved: [u32; 2],
@@ -614,6 +614,35 @@ impl Sequenced for ControlRequest {
     }
 }
 
+/// Bytes of text a [`LogLine`] carries (longer lines are cut at a UTF-8 boundary).
+pub const LOG_TEXT_LEN: usize = 200;
+
+/// One line a stage wrote to its standard error (its `tracing` output), as the supervisor
+/// forwarded it (256 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::LogLine")]
+pub struct LogLine {
+    /// Counter of lines from this supervisor.
+    pub seq: u64,
+    /// Time the supervisor read the line, CLOCK_MONOTONIC ns.
+    pub time_ns: u64,
+    /// [`LogLevel`] code (0 when the line names none).
+    pub level: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// The stage that wrote it, NUL-padded.
+    pub stage: [u8; NAME_LEN],
+    /// The line, NUL-padded UTF-8.
+    pub text: [u8; LOG_TEXT_LEN],
+}
+
+impl Sequenced for LogLine {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
 /// Cells per side of a [`NavMap`] (a square window centred near the robot).
 pub const NAV_MAP_SIDE: usize = 128;
 /// [`NavMap`] cell value of a cell never seen.
@@ -717,6 +746,7 @@ mod tests {
         assert_eq!(size_of::<SupervisorStatus>(), 56 + 12 * 232);
         assert_eq!(size_of::<ControlRequest>(), 48);
         assert_eq!(size_of::<RobotPose>(), 56);
+        assert_eq!(size_of::<LogLine>(), 256);
         assert_eq!(size_of::<NavMap>(), 48 + 128 * 128);
     }
 

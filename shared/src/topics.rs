@@ -39,6 +39,7 @@
 //! | `actuator/sent` | [`ActuatorReport`] | actuator (capture in a replay) | decision (dead reckoning), supervisor, view, probe |
 //! | `decision/pose` | [`RobotPose`] | decision | view, probe |
 //! | `decision/map` | [`NavMap`] | decision (a few per second) | view, probe |
+//! | `log` | [`LogLine`] | supervisor (each stage's standard error, line by line) | view, probe |
 //! | `heartbeat/<stage>` | [`StageHeartbeat`] | each stage | supervisor, probe |
 //! | `supervisor/status` | [`SupervisorStatus`] | supervisor | `hvs status`, probe |
 //! | `supervisor/control` | [`ControlRequest`] | `hvs restart`, `hvs stop` | supervisor |
@@ -54,9 +55,9 @@
 use core::marker::PhantomData;
 
 use crate::messages::{
-    ActuatorReport, ControlRequest, Decision, DisparityMap320x240, DisparityMap640x480, NavMap,
-    RangeReport, RobotPose, SimTruth, StageHeartbeat, StereoFrame320x240, StereoFrame640x480,
-    SupervisorStatus,
+    ActuatorReport, ControlRequest, Decision, DisparityMap320x240, DisparityMap640x480, LogLine,
+    NavMap, RangeReport, RobotPose, SimTruth, StageHeartbeat, StereoFrame320x240,
+    StereoFrame640x480, SupervisorStatus,
 };
 
 /// Prefix of every hvs service name.
@@ -103,6 +104,10 @@ impl<T> Topic<T> {
             max_borrowed: 5,
             ..Self::new(path)
         }
+    }
+
+    const fn with_buffer(self, max_buffer: usize) -> Self {
+        Self { max_buffer, ..self }
     }
 
     const fn with_publishers(self, max_publishers: usize) -> Self {
@@ -154,6 +159,8 @@ pub const NAV_MAP: Topic<NavMap> = Topic::new("decision/map");
 pub const ACTUATOR_SENT: Topic<ActuatorReport> = Topic::new("actuator/sent");
 /// Per-stage heartbeats: use [`Topic::stage_service_name`] with the stage name.
 pub const HEARTBEAT: Topic<StageHeartbeat> = Topic::new("heartbeat");
+/// The stages' log lines, as the supervisor forwards them (bursts: a deeper queue).
+pub const LOG: Topic<LogLine> = Topic::new("log").with_buffer(32);
 /// The supervisor's status table.
 pub const SUPERVISOR_STATUS: Topic<SupervisorStatus> = Topic::new("supervisor/status");
 /// Requests to the supervisor (several `hvs restart` may run at once).
@@ -297,7 +304,7 @@ pub const STAGE_INPUTS: [StageInput; 6] = [
 ];
 
 /// Every fixed topic path with its iceoryx2 payload type name, for discovery by probes.
-pub const ALL_TOPIC_PATHS: [(&str, &str); 14] = [
+pub const ALL_TOPIC_PATHS: [(&str, &str); 15] = [
     (SIM_CAMERA.path, "hvs::StereoFrame640x480"),
     (SIM_GT_DISPARITY.path, "hvs::DisparityMap640x480"),
     (SIM_TRUTH.path, "hvs::SimTruth"),
@@ -310,6 +317,7 @@ pub const ALL_TOPIC_PATHS: [(&str, &str); 14] = [
     (ACTUATOR_SENT.path, "hvs::ActuatorReport"),
     (DECISION_POSE.path, "hvs::RobotPose"),
     (NAV_MAP.path, "hvs::NavMap"),
+    (LOG.path, "hvs::LogLine"),
     (SUPERVISOR_STATUS.path, "hvs::SupervisorStatus"),
     (SUPERVISOR_CONTROL.path, "hvs::ControlRequest"),
 ];
@@ -338,6 +346,8 @@ pub enum TopicByPath {
     RobotPose(&'static Topic<RobotPose>),
     /// `decision/map`.
     NavMap(&'static Topic<NavMap>),
+    /// `log`.
+    LogLine(&'static Topic<LogLine>),
     /// `heartbeat/<stage>`: the topic and the stage.
     StageHeartbeat(&'static Topic<StageHeartbeat>, &'static str),
     /// `supervisor/status`.
@@ -363,6 +373,7 @@ pub fn topic_by_path(path: &str) -> Option<TopicByPath> {
         p if p == ACTUATOR_SENT.path => T::ActuatorReport(&ACTUATOR_SENT),
         p if p == DECISION_POSE.path => T::RobotPose(&DECISION_POSE),
         p if p == NAV_MAP.path => T::NavMap(&NAV_MAP),
+        p if p == LOG.path => T::LogLine(&LOG),
         p if p == SUPERVISOR_STATUS.path => T::SupervisorStatus(&SUPERVISOR_STATUS),
         p if p == SUPERVISOR_CONTROL.path => T::ControlRequest(&SUPERVISOR_CONTROL),
         p => {

@@ -128,30 +128,36 @@ fn watch(
 ) -> Result<(), String> {
     let node = IpcNode::create(instance, "bench-view").map_err(|e| e.to_string())?;
     let deadline = Instant::now() + Duration::from_secs(60);
-    let port = loop {
-        if stop.load(Ordering::Relaxed) {
-            return Ok(());
-        }
-        if let Some(p) = view_port(&node)? {
-            break p;
-        }
-        if Instant::now() > deadline {
-            return Err("the view did not serve within 60 s".into());
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    };
-    let mut client = FoxgloveClient::connect(port)?;
-    let all: Vec<String> = client.channels.keys().cloned().collect();
-    let want: Vec<&str> = if topics.is_empty() {
-        all.iter().map(String::as_str).collect()
-    } else {
-        topics.iter().map(String::as_str).collect()
-    };
-    client.subscribe(&want)?;
+    // Connect, read until the connection ends, and connect again: the pipeline stopping (or
+    // the view restarting) closes it; the counts say what was watched.
     while !stop.load(Ordering::Relaxed) {
-        if let Some(r) = client.poll()? {
-            messages.fetch_add(1, Ordering::Relaxed);
-            bytes.fetch_add(r.payload.len() as u64, Ordering::Relaxed);
+        let Some(port) = view_port(&node)? else {
+            if Instant::now() > deadline && messages.load(Ordering::Relaxed) == 0 {
+                return Err("the view did not serve within 60 s".into());
+            }
+            std::thread::sleep(Duration::from_millis(200));
+            continue;
+        };
+        let Ok(mut client) = FoxgloveClient::connect(port) else {
+            std::thread::sleep(Duration::from_millis(200));
+            continue;
+        };
+        let all: Vec<String> = client.channels.keys().cloned().collect();
+        let want: Vec<&str> = if topics.is_empty() {
+            all.iter().map(String::as_str).collect()
+        } else {
+            topics.iter().map(String::as_str).collect()
+        };
+        client.subscribe(&want)?;
+        while !stop.load(Ordering::Relaxed) {
+            match client.poll() {
+                Ok(Some(r)) => {
+                    messages.fetch_add(1, Ordering::Relaxed);
+                    bytes.fetch_add(r.payload.len() as u64, Ordering::Relaxed);
+                }
+                Ok(None) => {}
+                Err(_) => break,
+            }
         }
     }
     Ok(())

@@ -529,6 +529,7 @@ fn main() -> ExitCode {
                 report,
                 replay,
                 record,
+                latency_warm_up: std::time::Duration::ZERO,
             })
             .map(|_| ())
         })(),

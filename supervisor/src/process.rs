@@ -13,6 +13,8 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::{Signal, kill};
+
+pub use crate::run::LineSender;
 use nix::unistd::Pid;
 
 /// Why a stage could not be spawned.
@@ -45,6 +47,8 @@ pub struct Launch<'a> {
     pub default_log_filter: &'a str,
     /// CPU niceness of the child.
     pub nice: i32,
+    /// Where its standard error lines go besides the terminal (the `log` topic).
+    pub log_lines: Option<&'a LineSender>,
 }
 
 /// Spawns a stage and starts forwarding its output.
@@ -60,12 +64,22 @@ pub fn spawn(launch: &Launch<'_>) -> Result<Child, SpawnError> {
     if std::env::var_os("RUST_LOG").is_none() {
         cmd.env("RUST_LOG", launch.default_log_filter);
     }
-    spawn_child(launch.stage, cmd, launch.nice)
+    spawn_logged(launch.stage, cmd, launch.nice, launch.log_lines)
 }
 
 /// Spawns `cmd` as a child of the pipeline (own process group, SIGTERM when the supervisor
 /// dies, output forwarded with `name` in front).
-pub fn spawn_child(name: &str, mut cmd: Command, nice: i32) -> Result<Child, SpawnError> {
+pub fn spawn_child(name: &str, cmd: Command, nice: i32) -> Result<Child, SpawnError> {
+    spawn_logged(name, cmd, nice, None)
+}
+
+/// [`spawn_child`], with its standard error lines also sent to `log_lines`.
+fn spawn_logged(
+    name: &str,
+    mut cmd: Command,
+    nice: i32,
+    log_lines: Option<&LineSender>,
+) -> Result<Child, SpawnError> {
     cmd.stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -95,16 +109,21 @@ pub fn spawn_child(name: &str, mut cmd: Command, nice: i32) -> Result<Child, Spa
         source,
     })?;
     if let Some(out) = child.stdout.take() {
-        forward(name.to_string(), out, false);
+        forward(name.to_string(), out, false, None);
     }
     if let Some(err) = child.stderr.take() {
-        forward(name.to_string(), err, true);
+        forward(name.to_string(), err, true, log_lines.cloned());
     }
     Ok(child)
 }
 
 /// Copies a child's stream to ours, one prefixed line at a time, until it closes.
-fn forward<R: Read + Send + 'static>(stage: String, stream: R, to_stderr: bool) {
+fn forward<R: Read + Send + 'static>(
+    stage: String,
+    stream: R,
+    to_stderr: bool,
+    log_lines: Option<LineSender>,
+) {
     let name = stage.clone();
     let spawned = std::thread::Builder::new()
         .name(format!("log-{stage}"))
@@ -118,6 +137,9 @@ fn forward<R: Read + Send + 'static>(stage: String, stream: R, to_stderr: bool) 
                     Ok(_) => {
                         let text = String::from_utf8_lossy(&line);
                         let text = text.trim_end();
+                        if let Some(l) = &log_lines {
+                            l.send(&stage, text);
+                        }
                         // A closed terminal must not kill the forwarder: ignore write errors.
                         if to_stderr {
                             let _ = writeln!(std::io::stderr().lock(), "{stage:>10} | {text}");

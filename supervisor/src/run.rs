@@ -29,7 +29,10 @@ use crate::procstat::{self, ProcSample};
 use crate::report::{LatencyReport, RunReport, SimReport, StageReport};
 
 mod lock;
+mod log_lines;
 mod recording;
+
+pub use log_lines::LineSender;
 
 use lock::InstanceLock;
 use recording::{Recorder, check_recording};
@@ -55,6 +58,9 @@ pub struct RunOptions {
     pub replay: Option<PathBuf>,
     /// Record the run (`hvs probe record`'s default topics) from before the first frame.
     pub record: Option<PathBuf>,
+    /// Latencies of decisions made in the first this-long are left out of the report (the
+    /// stages starting up hold most of a short run's tail; benchmarks compare steady states).
+    pub latency_warm_up: Duration,
 }
 
 /// Counters of a stage, summed over its incarnations.
@@ -200,6 +206,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     let decisions = node.subscriber(&topics::DECISIONS, 4)?;
     let sent = node.subscriber(&topics::ACTUATOR_SENT, 4)?;
     let truth = node.subscriber(&topics::SIM_TRUTH, 1)?;
+    let (mut log_forwarder, log_lines) =
+        log_lines::LogForwarder::new(node.publisher(&topics::LOG)?);
 
     let mut slots = Vec::new();
     for mut spec in specs {
@@ -263,6 +271,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
         last_command: MotionCommand::Stop,
         last_truth: None,
         replay_end: None,
+        log_lines,
+        latency_warm_up: opts.latency_warm_up,
     };
     tracing::info!(
         "hvs: instance {}, config {}, stages from {}",
@@ -328,6 +338,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
         sup.poll_heartbeats()?;
         sup.poll_children();
         sup.poll_pipeline(&decisions, &sent, &truth)?;
+        log_forwarder.drain();
         status_pub.update_connections();
         if Instant::now() >= next_status {
             let secs = status_period.as_secs_f64();
@@ -391,6 +402,10 @@ struct Supervisor {
     last_truth: Option<SimTruth>,
     /// The replaying capture stage ended.
     replay_end: Option<ReplayEnd>,
+    /// Where the stages' output readers queue their lines for the `log` topic.
+    log_lines: log_lines::LineSender,
+    /// See [`RunOptions::latency_warm_up`].
+    latency_warm_up: Duration,
 }
 
 /// How the capture stage of a replay ended.
@@ -413,6 +428,7 @@ impl Supervisor {
             extra_args: &slot.spec.args,
             default_log_filter: DEFAULT_STAGE_LOG,
             nice: slot.spec.nice,
+            log_lines: Some(&self.log_lines),
         };
         slot.spawned_at = Instant::now();
         slot.last_heartbeat = None;
@@ -671,7 +687,9 @@ impl Supervisor {
         while let Some(d) = decisions.receive()? {
             let d = d.payload();
             let latency = d.published_ns.saturating_sub(d.capture_ns);
-            self.decision_latency.record(latency);
+            if self.started.elapsed() >= self.latency_warm_up {
+                self.decision_latency.record(latency);
+            }
             self.period_decision_latency.record(latency);
             self.decisions_seen += 1;
             self.last_command = MotionCommand::from_code(d.command);
@@ -681,6 +699,7 @@ impl Supervisor {
             let r = r.payload();
             self.commands_sent += 1;
             match SendReason::from_code(r.reason) {
+                Some(SendReason::Decision) if self.started.elapsed() < self.latency_warm_up => {}
                 Some(SendReason::Decision) => self
                     .command_latency
                     .record(r.sent_ns.saturating_sub(r.decision_capture_ns)),

@@ -260,6 +260,33 @@ fn the_view_killed_is_restarted_and_the_robot_never_notices() {
     c.subscribe(&["/frames/320x240/left"]).expect("subscribe");
     c.collect(&["/frames/320x240/left"], 1, WAIT)
         .expect("an image from the restarted view");
+
+    // The stages' own log lines reach /log: restart the 640x480 worker (off the decision
+    // path) and look for its start-up line and the supervisor's note of the restart.
+    c.subscribe(&["/log"]).expect("subscribe to /log");
+    hvs_tests::hvs_ok(&["restart", "stereo-hi", "--instance", &p.instance]);
+    let deadline = Instant::now() + WAIT;
+    let (mut from_stage, mut restart_noted) = (false, false);
+    while !(from_stage && restart_noted) {
+        assert!(
+            Instant::now() < deadline,
+            "no log lines of the restart on /log (stage's own: {from_stage}, restart: {restart_noted})"
+        );
+        let Ok(m) = c.next(Duration::from_secs(1)) else {
+            continue;
+        };
+        if m.topic != "/log" {
+            continue;
+        }
+        let text = |field| {
+            hvs_view::client::bytes_field(&m.payload, field)
+                .map(|b| String::from_utf8_lossy(b).into_owned())
+                .unwrap_or_default()
+        };
+        let (message, name) = (text(3), text(4));
+        from_stage |= name == "stereo-hi" && message.contains("starting");
+        restart_noted |= name == "supervisor" && message.contains("stereo-hi restarted");
+    }
 }
 
 /// A plain HTTP/1.1 request to loopback: (status code, body). The body is read to its
@@ -371,6 +398,10 @@ impl Browser {
             .expect("a page target")
             .to_string();
         let (ws, _) = tungstenite::connect(url.as_str()).expect("DevTools connection");
+        // A browser that stops answering fails the test instead of hanging it.
+        if let tungstenite::stream::MaybeTlsStream::Plain(s) = ws.get_ref() {
+            s.set_read_timeout(Some(WAIT)).expect("read timeout");
+        }
         Self {
             child,
             _profile: profile,

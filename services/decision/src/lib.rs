@@ -67,6 +67,18 @@ pub enum Policy {
 }
 
 impl Policy {
+    /// The contract's code of this policy ([`hvs_shared::messages::NavPolicy`]).
+    pub fn nav_policy(self) -> hvs_shared::messages::NavPolicy {
+        use hvs_shared::messages::NavPolicy as N;
+        match self {
+            Self::Reference => N::Reference,
+            Self::Fuzzy => N::Fuzzy,
+            Self::MeanEstimation => N::MeanEstimation,
+            Self::ThresholdEstimation => N::ThresholdEstimation,
+            Self::Explore => N::Explore,
+        }
+    }
+
     /// The code of a configured policy.
     pub fn of(policy: DecisionPolicy) -> Self {
         match policy {

@@ -88,7 +88,7 @@ pub fn decision_message(
         wall_right: d.memberships.right as f32,
         turn_angle_deg: d.turn_angle_deg as f32,
         ramp: d.ramp,
-        policy: policy as u32,
+        policy: policy.nav_policy().code(),
         reserved: [0; 2],
     }
 }
@@ -102,6 +102,23 @@ mod tests {
             seq,
             sent_ns,
             ..ActuatorReport::default()
+        }
+    }
+
+    #[test]
+    fn policy_codes_and_labels_are_the_contract_and_the_config_names() {
+        use hvs_runtime::config::DecisionPolicy as D;
+        for d in [
+            D::Reference,
+            D::Fuzzy,
+            D::MeanEstimation,
+            D::ThresholdEstimation,
+            D::Explore,
+        ] {
+            let p = Policy::of(d);
+            assert_eq!(p.nav_policy().code(), p as u32, "{d:?}");
+            let config_name = serde_json::to_value(d).expect("serialises");
+            assert_eq!(config_name, p.nav_policy().label(), "{d:?}");
         }
     }
 

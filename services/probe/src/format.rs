@@ -3,10 +3,10 @@
 
 use hvs_shared::messages::{
     ActuatorReport, ControlCommand, ControlRequest, Decision, DisparityHeader, DisparityMap320x240,
-    DisparityMap640x480, FrameHeader, FrameSource, IntersectionType, MotionCommand, NavMap,
-    RangeReport, RangeSource, RangeWindow, RobotPose, RowAlignState, SendReason, SimTruth,
-    StageHealth, StageHeartbeat, StageState, StereoAlgorithm, StereoFrame320x240,
-    StereoFrame640x480, SupervisorStatus, decode_name,
+    DisparityMap640x480, FrameHeader, FrameSource, IntersectionType, LogLevel, LogLine,
+    MotionCommand, NavMap, RangeReport, RangeSource, RangeWindow, RobotPose, RowAlignState,
+    SendReason, SimTruth, StageHealth, StageHeartbeat, StageState, StereoAlgorithm,
+    StereoFrame320x240, StereoFrame640x480, SupervisorStatus, decode_name,
 };
 use serde_json::{Value, json};
 
@@ -313,6 +313,30 @@ impl Describe for ActuatorReport {
             "capture_to_sent_ms": span_ms(self.decision_capture_ns, self.sent_ns),
             "bytes_hex": hex_bytes(sent_bytes(self)),
             "bytes_text": escape_bytes(sent_bytes(self)),
+        })
+    }
+}
+
+impl Describe for LogLine {
+    fn stamp_ns(&self) -> Option<u64> {
+        stamp(self.time_ns)
+    }
+
+    fn describe_text(&self) -> String {
+        format!(
+            "{:>10} | {}",
+            decode_name(&self.stage),
+            decode_name(&self.text)
+        )
+    }
+
+    fn describe_json(&self) -> Value {
+        json!({
+            "seq": self.seq,
+            "time_ns": self.time_ns,
+            "level": LogLevel::from_code(self.level).map_or("-", LogLevel::label),
+            "stage": decode_name(&self.stage),
+            "text": decode_name(&self.text),
         })
     }
 }

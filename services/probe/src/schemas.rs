@@ -9,8 +9,8 @@
 
 use hvs_runtime::config::CameraConfig;
 use hvs_shared::messages::{
-    ActuatorReport, Decision, IntersectionType, MotionCommand, RangeReport, RangeSource, RobotPose,
-    SendReason,
+    ActuatorReport, Decision, IntersectionType, MotionCommand, NavPolicy, RangeReport, RangeSource,
+    RobotPose, SendReason,
 };
 use serde_json::{Map, Value, json};
 
@@ -243,7 +243,8 @@ impl FoxgloveJson for Decision {
                     "turn angle of a turn command, degrees",
                 ),
                 ("ramp", Kind::Integer, "PSC ramp, 0..63"),
-                ("policy", Kind::Integer, "decision policy code"),
+                ("policy", Kind::Integer, "NavPolicy code"),
+                ("policy_label", Kind::Text, "NavPolicy label"),
             ],
             &[],
         )
@@ -265,6 +266,7 @@ impl FoxgloveJson for Decision {
             "turn_angle_deg": self.turn_angle_deg,
             "ramp": self.ramp,
             "policy": self.policy,
+            "policy_label": NavPolicy::from_code(self.policy).map_or("?", NavPolicy::label),
         })
     }
 

@@ -236,8 +236,14 @@ impl FoxgloveClient {
     }
 }
 
-/// The `data` field (2) of a protobuf `foxglove.CompressedImage`, read by hand.
+/// The `data` field (2) of a protobuf `foxglove.CompressedImage`.
 pub fn compressed_image_data(buf: &[u8]) -> Option<&[u8]> {
+    bytes_field(buf, 2)
+}
+
+/// The first length-delimited field `field` (bytes, string or message) of a protobuf
+/// message, read by hand (wire types 0, 1, 2 and 5).
+pub fn bytes_field(buf: &[u8], field: u64) -> Option<&[u8]> {
     let mut i = 0usize;
     let varint = |i: &mut usize| -> Option<u64> {
         let mut v = 0u64;
@@ -257,14 +263,15 @@ pub fn compressed_image_data(buf: &[u8]) -> Option<&[u8]> {
             0 => {
                 varint(&mut i)?;
             }
-            1 => i += 8,
-            5 => i += 4,
+            1 => i = i.checked_add(8)?,
+            5 => i = i.checked_add(4)?,
             2 => {
                 let n = usize::try_from(varint(&mut i)?).ok()?;
-                if key >> 3 == 2 {
-                    return buf.get(i..i + n);
+                let end = i.checked_add(n)?;
+                if key >> 3 == field {
+                    return buf.get(i..end);
                 }
-                i += n;
+                i = end;
             }
             _ => return None,
         }

@@ -1,9 +1,14 @@
 //! The view's own JSON channels: the stage table (from the supervisor's status), the
-//! simulator's true pose, the colour scale and wall thresholds, and the log lines made from
-//! changes in the stage table (a stage restarted, stopped, degraded).
+//! simulator's true pose, the colour scale and wall thresholds; and the log lines: the
+//! stages' own (the `log` topic) and those made from changes in the stage table (a stage
+//! restarted, stopped, degraded).
 
+use foxglove::messages::Log;
+use foxglove::messages::log::Level;
 use hvs_probe::schemas::{Kind, schema_of};
-use hvs_shared::messages::{SimTruth, StageHealth, StageState, SupervisorStatus, decode_name};
+use hvs_shared::messages::{
+    LogLevel, LogLine, SimTruth, StageHealth, StageState, SupervisorStatus, decode_name,
+};
 use serde_json::{Value, json};
 
 /// Schema of [`sim_truth_json`].
@@ -186,9 +191,27 @@ pub fn legend_json(l: &Legend) -> Value {
     })
 }
 
-/// One log line: a level and a text.
+/// A stage's log line (the `log` topic) as a `foxglove.Log` named after the stage.
+pub fn stage_log(l: &LogLine, wall_ns: u64) -> Log {
+    let level = match LogLevel::from_code(l.level) {
+        Some(LogLevel::Trace | LogLevel::Debug) => Level::Debug,
+        Some(LogLevel::Info) => Level::Info,
+        Some(LogLevel::Warn) => Level::Warning,
+        Some(LogLevel::Error) => Level::Error,
+        None => Level::Unknown,
+    };
+    Log {
+        timestamp: Some(crate::encode::stamp(wall_ns)),
+        level: level as i32,
+        message: decode_name(&l.text).to_string(),
+        name: decode_name(&l.stage).to_string(),
+        ..Default::default()
+    }
+}
+
+/// A line about a change in the stage table: a level and a text.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LogLine {
+pub struct ChangeLine {
     /// Warning rather than information.
     pub warning: bool,
     /// The text.
@@ -204,7 +227,7 @@ pub struct StageChanges {
 
 impl StageChanges {
     /// The lines for a new table (none for the first one).
-    pub fn lines(&mut self, s: &SupervisorStatus) -> Vec<LogLine> {
+    pub fn lines(&mut self, s: &SupervisorStatus) -> Vec<ChangeLine> {
         let n = (s.stage_count as usize).min(s.stages.len());
         let now: Vec<(String, u32, u32, u32)> = s.stages[..n]
             .iter()
@@ -224,19 +247,19 @@ impl StageChanges {
                     continue;
                 };
                 if restarts > r0 {
-                    out.push(LogLine {
+                    out.push(ChangeLine {
                         warning: true,
                         text: format!("{name} restarted ({restarts} restarts)"),
                     });
                 }
                 if state != s0 {
-                    out.push(LogLine {
+                    out.push(ChangeLine {
                         warning: StageState::from_code(*state) != Some(StageState::Running),
                         text: format!("{name}: {} -> {}", state_label(*s0), state_label(*state)),
                     });
                 }
                 if health != h0 && *health != 0 {
-                    out.push(LogLine {
+                    out.push(ChangeLine {
                         warning: StageHealth::from_code(*health) == Some(StageHealth::Degraded),
                         text: format!("{name} {}", health_label(*health)),
                     });

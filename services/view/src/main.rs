@@ -17,7 +17,9 @@ use hvs_shared::messages::{LO_HEIGHT, LO_WIDTH, Sequenced, StageHealth};
 use hvs_shared::topics::{self, Stage};
 use hvs_view::channels::{JsonChannel, ViewChannels};
 use hvs_view::encode::{calibration, frame_transforms, nav_grid, stamp};
-use hvs_view::health::{Legend, StageChanges, legend_json, sim_truth_json, stage_table_json};
+use hvs_view::health::{
+    Legend, StageChanges, legend_json, sim_truth_json, stage_log, stage_table_json,
+};
 use hvs_view::pacing::RateLimit;
 use hvs_view::page::PageServer;
 use hvs_view::worker::{DisparityJob, Encoder, EncoderSettings, ImageJob};
@@ -171,6 +173,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let maps = rt.node.subscriber(&topics::NAV_MAP, 1)?;
     let truth = rt.node.subscriber(&topics::SIM_TRUTH, 2)?;
     let status = rt.node.subscriber(&topics::SUPERVISOR_STATUS, 1)?;
+    let log_lines = rt.node.subscriber(&topics::LOG, topics::LOG.max_buffer)?;
 
     let offset = wall_offset_ns();
     let wall = move |mono_ns: u64| (i128::from(mono_ns) + offset).max(0) as u64;
@@ -235,6 +238,10 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         while let Some(d) = disparity.receive()? {
             rt.count_in(1);
             let m = d.payload();
+            // The legend follows the searched range of the newest map.
+            let scale = settings.scale(m.header.min_disp, m.header.max_disp);
+            legend.near_m = scale.near_m();
+            legend.far_m = scale.far_m();
             if !need_disparity || !disparity_rate.admit(m.header.capture_ns) {
                 continue;
             }
@@ -251,11 +258,6 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 max_disp: m.header.max_disp,
                 wall_ns: wall(m.header.capture_ns),
             });
-            if legend.far_m == 0.0 {
-                let scale = settings.scale(m.header.min_disp, m.header.max_disp);
-                legend.near_m = scale.near_m();
-                legend.far_m = scale.far_m();
-            }
         }
 
         forward_json(&ranges, &channels.ranges, &wall, rt)?;
@@ -302,10 +304,9 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 channels.stages.log(&stage_table_json(p), t);
                 rt.count_out(0);
             }
+            // The supervisor logs these changes itself; here they only go to /log.
             for line in changes.lines(p) {
-                if line.warning {
-                    tracing::warn!("{}", line.text);
-                }
+                tracing::debug!("{}", line.text);
                 if channels.log.has_sinks() {
                     channels.log.log_with_time(
                         &Log {
@@ -322,6 +323,16 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                         t,
                     );
                 }
+            }
+        }
+
+        while let Some(l) = log_lines.receive()? {
+            rt.count_in(1);
+            if channels.log.has_sinks() {
+                let p = l.payload();
+                let t = wall(p.time_ns);
+                channels.log.log_with_time(&stage_log(p, t), t);
+                rt.count_out(0);
             }
         }
 

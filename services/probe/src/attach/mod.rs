@@ -43,6 +43,7 @@ macro_rules! dispatch {
             TopicByPath::ActuatorReport(t) => $f(t, None, $($arg),*),
             TopicByPath::RobotPose(t) => $f(t, None, $($arg),*),
             TopicByPath::NavMap(t) => $f(t, None, $($arg),*),
+            TopicByPath::LogLine(t) => $f(t, None, $($arg),*),
             TopicByPath::StageHeartbeat(t, stage) => $f(t, Some(stage), $($arg),*),
             TopicByPath::SupervisorStatus(t) => $f(t, None, $($arg),*),
             TopicByPath::ControlRequest(t) => $f(t, None, $($arg),*),
