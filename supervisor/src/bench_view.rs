@@ -12,10 +12,11 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use hvs_runtime::ipc::IpcNode;
-use hvs_shared::messages::decode_name;
+use hvs_runtime::ipc::{IpcNode, TopicSubscriber};
+use hvs_shared::messages::{SupervisorStatus, decode_name};
 use hvs_shared::topics;
 use hvs_view::client::FoxgloveClient;
+use hvs_view::note;
 
 /// Who watches the robot during a benchmark run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -95,12 +96,9 @@ impl Watcher {
     }
 }
 
-/// The view's WebSocket port from its note in the supervisor's status (`ws :PORT`).
-fn view_port(node: &IpcNode) -> Result<Option<u16>, String> {
-    let sub = node
-        .subscriber(&topics::SUPERVISOR_STATUS, 1)
-        .map_err(|e| e.to_string())?;
-    let Some(s) = sub.receive_latest().map_err(|e| e.to_string())? else {
+/// The view's WebSocket port from its note in the supervisor's newest status.
+fn view_port(status: &TopicSubscriber<SupervisorStatus>) -> Result<Option<u16>, String> {
+    let Some(s) = status.receive_latest().map_err(|e| e.to_string())? else {
         return Ok(None);
     };
     let st = s.payload();
@@ -108,15 +106,7 @@ fn view_port(node: &IpcNode) -> Result<Option<u16>, String> {
     Ok(st.stages[..n]
         .iter()
         .find(|e| decode_name(&e.stage) == "view")
-        .and_then(|e| {
-            decode_name(&e.note)
-                .split("ws :")
-                .nth(1)?
-                .split_whitespace()
-                .next()?
-                .parse()
-                .ok()
-        }))
+        .and_then(|e| note::ws_port(decode_name(&e.note))))
 }
 
 fn watch(
@@ -127,11 +117,14 @@ fn watch(
     bytes: &AtomicU64,
 ) -> Result<(), String> {
     let node = IpcNode::create(instance, "bench-view").map_err(|e| e.to_string())?;
+    let status = node
+        .subscriber(&topics::SUPERVISOR_STATUS, 1)
+        .map_err(|e| e.to_string())?;
     let deadline = Instant::now() + Duration::from_secs(60);
     // Connect, read until the connection ends, and connect again: the pipeline stopping (or
     // the view restarting) closes it; the counts say what was watched.
     while !stop.load(Ordering::Relaxed) {
-        let Some(port) = view_port(&node)? else {
+        let Some(port) = view_port(&status)? else {
             if Instant::now() > deadline && messages.load(Ordering::Relaxed) == 0 {
                 return Err("the view did not serve within 60 s".into());
             }

@@ -263,7 +263,9 @@ impl Pipeline {
                 let state = st["state"].as_str().unwrap_or("");
                 // The view sends only to clients: it is ready once it serves.
                 let serving = st["stage"] == "view"
-                    && st["note"].as_str().is_some_and(|n| n.contains("ws :"));
+                    && st["note"]
+                        .as_str()
+                        .is_some_and(|n| hvs_view::note::ws_port(n).is_some());
                 state == "disabled"
                     || (state == "running"
                         && (serving || st["frames_out"].as_u64().unwrap_or(0) > 0))
@@ -348,24 +350,11 @@ pub use hvs_runtime::ipc::iceoryx_files;
 /// The ports the view stage serves on (WebSocket, web page), read from its status note once
 /// it serves; panics with the logs after `timeout`.
 pub fn view_ports(p: &Pipeline, timeout: Duration) -> (u16, u16) {
-    let status = p.wait_status("the view serving", timeout, |s| {
-        stages(s).iter().any(|st| {
-            st["stage"] == "view"
-                && st["note"]
-                    .as_str()
-                    .is_some_and(|n| n.contains("ws :") && n.contains("http :"))
-        })
-    });
-    let note = stage(&status, "view")["note"]
-        .as_str()
-        .unwrap_or("")
-        .to_string();
-    let port_after = |tag: &str| -> u16 {
-        note.split(tag)
-            .nth(1)
-            .and_then(|rest| rest.split_whitespace().next())
-            .and_then(|n| n.parse().ok())
-            .unwrap_or_else(|| panic!("no port after {tag:?} in the view's note {note:?}"))
+    use hvs_view::note::{http_port, ws_port};
+    let ports = |s: &Value| {
+        let note = stage(s, "view")["note"].as_str().unwrap_or("").to_string();
+        ws_port(&note).zip(http_port(&note))
     };
-    (port_after("ws :"), port_after("http :"))
+    let status = p.wait_status("the view serving", timeout, |s| ports(s).is_some());
+    ports(&status).unwrap_or_default()
 }

@@ -214,7 +214,9 @@ fn the_view_killed_is_restarted_and_the_robot_never_notices() {
         let v = stage(s, "view");
         v["restarts"].as_u64().unwrap_or(0) >= 1
             && pid_of(s, "view") != view_pid
-            && v["note"].as_str().is_some_and(|n| n.contains("ws :"))
+            && v["note"]
+                .as_str()
+                .is_some_and(|n| hvs_view::note::ws_port(n).is_some())
     };
     let mut decisions_seen = 0;
     let mut after = None;

@@ -143,7 +143,8 @@ fn range_source_label(code: u32) -> &'static str {
     RangeSource::from_code(code).label()
 }
 
-fn used_windows(r: &RangeReport) -> &[RangeWindow] {
+/// The windows of a report that are in use.
+pub(crate) fn used_windows(r: &RangeReport) -> &[RangeWindow] {
     &r.windows[..(r.window_count as usize).min(r.windows.len())]
 }
 

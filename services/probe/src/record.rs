@@ -24,7 +24,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use hvs_runtime::clock::monotonic_ns;
+use hvs_runtime::clock::{WallClock, monotonic_ns};
 use hvs_runtime::config::CameraConfig;
 use hvs_runtime::error_chain;
 use hvs_runtime::ipc::{ReceiveError, TopicSubscriber};
@@ -200,15 +200,17 @@ pub trait Recordable: Payload {
     fn record_json(&self) -> Value {
         self.describe_json()
     }
-    /// Frame transforms recorded on `/tf` beside the message (poses only).
-    fn transforms(&self, _camera: &CameraConfig) -> Option<Value> {
+    /// Frame transforms recorded on `/tf` beside the message, stamped `stamp_ns` (poses
+    /// only).
+    fn transforms(&self, _camera: &CameraConfig, _stamp_ns: u64) -> Option<Value> {
         None
     }
 }
 
-/// The live view's JSON and schema (`crate::schemas`), so that both look the same.
+/// The live view's JSON and schema (`crate::schemas`), so that both look the same; the
+/// braces hold any further methods of the type.
 macro_rules! recordable_as_foxglove_json {
-    ($($t:ty),+) => {$(
+    ($t:ty { $($more:item)* }) => {
         impl Recordable for $t {
             fn schema() -> (&'static str, Value) {
                 (<$t as FoxgloveJson>::SCHEMA_NAME, <$t as FoxgloveJson>::json_schema())
@@ -216,34 +218,9 @@ macro_rules! recordable_as_foxglove_json {
             fn record_json(&self) -> Value {
                 self.to_foxglove_json()
             }
-            fn transforms(&self, camera: &CameraConfig) -> Option<Value> {
-                pose_transforms_json(self, camera)
-            }
+            $($more)*
         }
-    )+};
-}
-
-/// Only a pose has transforms.
-trait MaybePose {
-    fn pose(&self) -> Option<&RobotPose> {
-        None
-    }
-}
-impl MaybePose for RangeReport {}
-impl MaybePose for Decision {}
-impl MaybePose for ActuatorReport {}
-impl MaybePose for RobotPose {
-    fn pose(&self) -> Option<&RobotPose> {
-        Some(self)
-    }
-}
-
-fn pose_transforms_json<T: MaybePose>(m: &T, camera: &CameraConfig) -> Option<Value> {
-    let pose = m.pose()?;
-    Some(transforms_json(
-        &pose_transforms(pose, camera),
-        pose.published_ns,
-    ))
+    };
 }
 
 impl Recordable for StereoFrame320x240 {
@@ -260,7 +237,14 @@ impl Recordable for StereoFrame640x480 {
     }
 }
 
-recordable_as_foxglove_json!(RangeReport, Decision, ActuatorReport, RobotPose);
+recordable_as_foxglove_json!(RangeReport {});
+recordable_as_foxglove_json!(Decision {});
+recordable_as_foxglove_json!(ActuatorReport {});
+recordable_as_foxglove_json!(RobotPose {
+    fn transforms(&self, camera: &CameraConfig, stamp_ns: u64) -> Option<Value> {
+        Some(transforms_json(&pose_transforms(self, camera), stamp_ns))
+    }
+});
 
 /// One recorded topic: its subscriber and channel ids.
 trait Source {
@@ -309,9 +293,8 @@ impl<T: Recordable> Source for TopicSource<T> {
                     let msg = p.record_json().to_string();
                     sink.write(self.channels[0], log_ns, msg.as_bytes())?;
                     if let Some((channel, camera)) = &self.transforms
-                        && let Some(mut tf) = p.transforms(camera)
+                        && let Some(tf) = p.transforms(camera, log_ns)
                     {
-                        wall_stamps(&mut tf, log_ns);
                         sink.write(*channel, log_ns, tf.to_string().as_bytes())?;
                     }
                 }
@@ -343,25 +326,18 @@ fn raw_image(header: &FrameHeader, side: &str, pixels: &[u8], log_ns: u64, hvs: 
     .into_bytes()
 }
 
-/// Sets every `timestamp` of a `foxglove.FrameTransforms` to the wall-clock log time.
-fn wall_stamps(tf: &mut Value, log_ns: u64) {
-    for t in tf["transforms"].as_array_mut().into_iter().flatten() {
-        t["timestamp"] = crate::schemas::timestamp(log_ns);
-    }
-}
-
 /// The MCAP writer and the bookkeeping for a clean end.
 struct Sink {
     writer: mcap::Writer<CountingFile>,
     /// The last sequence number per channel (each channel counts its own messages).
     sequences: BTreeMap<u16, u32>,
-    /// CLOCK_REALTIME minus CLOCK_MONOTONIC at the start, ns.
-    wall_offset_ns: i128,
+    /// Log times are wall-clock.
+    wall: WallClock,
 }
 
 impl Sink {
     fn wall_ns(&self, monotonic_ns: u64) -> u64 {
-        (monotonic_ns as i128 + self.wall_offset_ns).max(0) as u64
+        self.wall.wall_ns(monotonic_ns)
     }
 
     fn write(&mut self, channel: u16, log_ns: u64, data: &[u8]) -> Result<(), Drained> {
@@ -377,14 +353,6 @@ impl Sink {
             .write_to_known_channel(&header, data)
             .map_err(|e| Drained::Write(error_chain(&e)))
     }
-}
-
-fn wall_offset_ns() -> i128 {
-    let wall = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as i128)
-        .unwrap_or(0);
-    wall - monotonic_ns() as i128
 }
 
 /// Topic of the frame transforms (world -> robot -> camera) beside `decision/pose`.
@@ -594,7 +562,7 @@ pub fn record(
     let mut sink = Sink {
         writer,
         sequences: BTreeMap::new(),
-        wall_offset_ns: wall_offset_ns(),
+        wall: WallClock::now(),
     };
     let mut counts: BTreeMap<String, TopicCounts> = paths
         .iter()

@@ -155,8 +155,7 @@ impl FoxgloveJson for RangeReport {
     }
 
     fn to_foxglove_json(&self) -> Value {
-        let n = (self.window_count as usize).min(self.windows.len());
-        let windows: Vec<Value> = self.windows[..n]
+        let windows: Vec<Value> = crate::format::used_windows(self)
             .iter()
             .map(|w| {
                 json!({

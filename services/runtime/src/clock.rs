@@ -19,6 +19,32 @@ pub fn elapsed_ns(earlier_ns: u64) -> u64 {
     monotonic_ns().saturating_sub(earlier_ns)
 }
 
+/// Converts `CLOCK_MONOTONIC` stamps to wall-clock (`CLOCK_REALTIME`, Unix epoch) ns, with
+/// the offset between the two clocks read once: what recordings and the live view show
+/// (Foxglove displays dates), while the payloads keep their monotonic stamps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WallClock {
+    /// `CLOCK_REALTIME` minus `CLOCK_MONOTONIC`, ns.
+    offset_ns: i128,
+}
+
+impl WallClock {
+    /// Reads the offset now.
+    pub fn now() -> Self {
+        let wall = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i128);
+        Self {
+            offset_ns: wall - i128::from(monotonic_ns()),
+        }
+    }
+
+    /// The wall-clock time of a monotonic stamp, ns since the Unix epoch.
+    pub fn wall_ns(&self, monotonic_ns: u64) -> u64 {
+        (i128::from(monotonic_ns) + self.offset_ns).max(0) as u64
+    }
+}
+
 /// Nanoseconds to milliseconds, for display.
 pub fn ns_to_ms(ns: u64) -> f64 {
     ns as f64 / 1e6
@@ -35,5 +61,15 @@ mod tests {
         let b = monotonic_ns();
         assert!(b > a + 1_000_000, "{a} -> {b}");
         assert!(elapsed_ns(b + 1_000_000_000) == 0);
+    }
+
+    #[test]
+    fn wall_clock_is_unix_time() {
+        let w = WallClock::now();
+        let unix_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        assert!(w.wall_ns(monotonic_ns()).abs_diff(unix_ns) < 1_000_000_000);
+        assert_eq!(w.wall_ns(10) + 5, w.wall_ns(15));
     }
 }

@@ -274,31 +274,28 @@ impl StageChanges {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use bytemuck::Zeroable;
     use hvs_probe::schemas::conforms;
     use hvs_shared::messages::{StageStatusEntry, encode_name};
 
     fn status(restarts: u32, state: StageState) -> SupervisorStatus {
-        let mut s: SupervisorStatus = bytemuck_zeroed();
+        let mut s = SupervisorStatus::zeroed();
         s.stage_count = 1;
         s.stages[0] = StageStatusEntry {
             stage: encode_name("fusion"),
             state: state as u32,
             restarts,
             health: StageHealth::Running as u32,
-            ..bytemuck_zeroed()
+            ..StageStatusEntry::zeroed()
         };
         s
-    }
-
-    fn bytemuck_zeroed<T: bytemuck::Zeroable>() -> T {
-        T::zeroed()
     }
 
     #[test]
     fn json_follows_the_schemas() {
         let s = status(2, StageState::Running);
         conforms(&stage_table_json(&s), &stage_table_schema()).expect("stage table");
-        conforms(&sim_truth_json(&bytemuck_zeroed()), &sim_truth_schema()).expect("truth");
+        conforms(&sim_truth_json(&SimTruth::zeroed()), &sim_truth_schema()).expect("truth");
         let l = Legend {
             near_m: 0.35,
             far_m: 9.6,

@@ -8,7 +8,8 @@
 //! - [`health`]: the stage table, the simulator's truth, the legend and log lines,
 //! - [`pacing`]: the per-channel rate limits,
 //! - [`page`]: the web page and its HTTP server,
-//! - [`client`]: a protocol client (tests and benchmarks).
+//! - [`client`]: a protocol client (tests and benchmarks),
+//! - [`note`]: the stage's status note with its ports, written and read back.
 //!
 //! Nothing is encoded for a channel no client subscribes to.
 
@@ -17,6 +18,7 @@ pub mod client;
 pub mod encode;
 pub mod health;
 pub mod latest;
+pub mod note;
 pub mod pacing;
 pub mod page;
 pub mod worker;

@@ -6,20 +6,21 @@ use std::net::SocketAddr;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU16, Ordering};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use foxglove::messages::{Log, log::Level};
-use hvs_probe::schemas::{FoxgloveJson, Pinhole, pose_transforms};
-use hvs_runtime::clock::monotonic_ns;
+use hvs_probe::schemas::{FoxgloveJson, pose_transforms};
+use hvs_runtime::clock::{WallClock, monotonic_ns};
 use hvs_runtime::ipc::TopicSubscriber;
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
-use hvs_shared::messages::{LO_HEIGHT, LO_WIDTH, Sequenced, StageHealth};
+use hvs_shared::messages::{Sequenced, StageHealth};
 use hvs_shared::topics::{self, Stage};
 use hvs_view::channels::{JsonChannel, ViewChannels};
 use hvs_view::encode::{calibration, frame_transforms, nav_grid, stamp};
 use hvs_view::health::{
     Legend, StageChanges, legend_json, sim_truth_json, stage_log, stage_table_json,
 };
+use hvs_view::note;
 use hvs_view::pacing::RateLimit;
 use hvs_view::page::PageServer;
 use hvs_view::worker::{DisparityJob, Encoder, EncoderSettings, ImageJob};
@@ -31,14 +32,6 @@ const RETRY_PERIOD: Duration = Duration::from_secs(2);
 
 fn main() -> ExitCode {
     run_stage(Stage::View, run)
-}
-
-/// CLOCK_REALTIME minus CLOCK_MONOTONIC, ns: Foxglove shows wall-clock times.
-fn wall_offset_ns() -> i128 {
-    let wall = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as i128);
-    wall - i128::from(monotonic_ns())
 }
 
 /// The servers, started (and retried) while the stage runs.
@@ -103,20 +96,14 @@ impl Servers {
     }
 
     fn note(&self) -> String {
-        let ws = match &self.ws {
-            Some(h) => format!("ws :{} clients {}", h.port(), h.client_count()),
-            None => self
-                .ws_error
-                .clone()
-                .unwrap_or_else(|| "ws starting".into()),
-        };
-        let http = match &self.page {
-            Some(p) => format!("http :{}", p.addr().port()),
-            None => self
-                .page_error
-                .clone()
-                .unwrap_or_else(|| "http starting".into()),
-        };
+        let ws = note::ws_part(match &self.ws {
+            Some(h) => Ok((h.port(), h.client_count())),
+            None => Err(self.ws_error.as_deref().unwrap_or("ws starting")),
+        });
+        let http = note::http_part(match &self.page {
+            Some(p) => Ok(p.addr().port()),
+            None => Err(self.page_error.as_deref().unwrap_or("http starting")),
+        });
         format!("{ws} {http}")
     }
 
@@ -159,7 +146,6 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         ViewChannels::new().map_err(|e| StageError::from(format!("foxglove channels: {e}")))?,
     );
     let settings = EncoderSettings::of(&rt.config);
-    let pinhole = Pinhole::of(&rt.config.camera, LO_WIDTH as u32, LO_HEIGHT as u32);
     let camera = rt.config.camera.clone();
     let encoder = Encoder::start(Arc::clone(&channels), settings.clone())
         .map_err(|e| StageError::from(format!("cannot start the encoder thread: {e}")))?;
@@ -175,8 +161,9 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let status = rt.node.subscriber(&topics::SUPERVISOR_STATUS, 1)?;
     let log_lines = rt.node.subscriber(&topics::LOG, topics::LOG.max_buffer)?;
 
-    let offset = wall_offset_ns();
-    let wall = move |mono_ns: u64| (i128::from(mono_ns) + offset).max(0) as u64;
+    // Foxglove shows wall-clock times.
+    let clock = WallClock::now();
+    let wall = move |mono_ns: u64| clock.wall_ns(mono_ns);
     let mut servers = Servers {
         ws: None,
         ws_error: None,
@@ -190,7 +177,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let mut image_rate = RateLimit::new(view.image_hz);
     let mut disparity_rate = RateLimit::new(view.disparity_hz);
     let mut truth_rate = RateLimit::new(10.0);
-    let mut left_kept: Vec<(u64, Vec<u8>)> = Vec::with_capacity(LEFT_KEPT);
+    let mut left_kept: Vec<(u64, Arc<[u8]>)> = Vec::with_capacity(LEFT_KEPT);
     let mut changes = StageChanges::default();
     let mut last_second = Instant::now() - Duration::from_secs(2);
     let lo = &rt.config.decision.lo;
@@ -212,25 +199,29 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         }
         servers.ensure(&channels, ws_addr, http_addr);
 
-        // Left images: copied out of shared memory only for a subscribed channel.
-        let need_left =
-            channels.left.has_sinks() || channels.fused.has_sinks() || channels.points.has_sinks();
+        // Left images: copied out of shared memory once, and only for a subscribed channel;
+        // the image job and the frames kept for pairing share that copy.
+        let pair_left = channels.fused.has_sinks() || channels.points.has_sinks();
         while let Some(f) = frames.receive()? {
             rt.count_in(1);
             let p = f.payload();
-            if !need_left {
+            let send = channels.left.has_sinks() && image_rate.admit(p.header.capture_ns);
+            if !send && !pair_left {
                 continue;
             }
-            if channels.left.has_sinks() && image_rate.admit(p.header.capture_ns) {
+            let left: Arc<[u8]> = Arc::from(&p.left[..]);
+            if send {
                 encoder.images.send(ImageJob {
-                    left: p.left.to_vec(),
+                    left: Arc::clone(&left),
                     wall_ns: wall(p.header.capture_ns),
                 });
             }
-            if left_kept.len() == LEFT_KEPT {
-                left_kept.remove(0);
+            if pair_left {
+                if left_kept.len() == LEFT_KEPT {
+                    left_kept.remove(0);
+                }
+                left_kept.push((p.header.frame_id, left));
             }
-            left_kept.push((p.header.frame_id, p.left.to_vec()));
         }
         let need_disparity = channels.disparity.has_sinks()
             || channels.fused.has_sinks()
@@ -248,8 +239,10 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             let left = left_kept
                 .iter()
                 .find(|(id, _)| *id == m.header.frame_id)
-                .map(|(_, l)| l.clone())
-                .unwrap_or_else(|| vec![0; m.disparity_q8.len()]);
+                .map_or_else(
+                    || Arc::from(vec![0; m.disparity_q8.len()]),
+                    |(_, l)| Arc::clone(l),
+                );
             encoder.disparities.send(DisparityJob {
                 left,
                 disparity_q8: m.disparity_q8.to_vec(),
@@ -343,7 +336,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
             if channels.calibration.has_sinks() {
                 channels
                     .calibration
-                    .log_with_time(&calibration(&pinhole, t), t);
+                    .log_with_time(&calibration(&settings.pinhole, t), t);
             }
             if channels.legend.wanted() && legend.far_m > 0.0 {
                 channels.legend.log(&legend_json(&legend), t);

@@ -21,8 +21,8 @@ use crate::latest::{LatestSender, latest};
 /// A left image to send.
 #[derive(Debug)]
 pub struct ImageJob {
-    /// Grey pixels, 320x240.
-    pub left: Vec<u8>,
+    /// Grey pixels, 320x240 (shared with the frames kept for pairing).
+    pub left: Arc<[u8]>,
     /// Capture time, wall-clock ns.
     pub wall_ns: u64,
 }
@@ -31,7 +31,7 @@ pub struct ImageJob {
 #[derive(Debug)]
 pub struct DisparityJob {
     /// Grey pixels of the left image, 320x240.
-    pub left: Vec<u8>,
+    pub left: Arc<[u8]>,
     /// Disparity, 1/256 px, 320x240.
     pub disparity_q8: Vec<u16>,
     /// Confidence per pixel.
@@ -45,7 +45,7 @@ pub struct DisparityJob {
 }
 
 /// What one job produced: messages sent and the time it took.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Encoded {
     /// Messages sent to clients.
     pub messages: u64,
@@ -162,11 +162,7 @@ impl Drop for Encoder {
 
 fn encode_image(ch: &ViewChannels, s: &EncoderSettings, job: ImageJob) -> Encoded {
     let t0 = monotonic_ns();
-    let mut out = Encoded {
-        messages: 0,
-        busy_ns: 0,
-        errors: 0,
-    };
+    let mut out = Encoded::default();
     if ch.left.has_sinks() {
         match jpeg(
             &job.left,
@@ -197,11 +193,7 @@ fn encode_disparity(
     job: DisparityJob,
 ) -> Encoded {
     let t0 = monotonic_ns();
-    let mut out = Encoded {
-        messages: 0,
-        busy_ns: 0,
-        errors: 0,
-    };
+    let mut out = Encoded::default();
     if job.left.len() != LO_PIXELS || job.disparity_q8.len() != LO_PIXELS {
         out.errors += 1;
         return out;

@@ -1,9 +1,9 @@
 //! The `log` topic: every line a stage writes to its standard error (its `tracing` output),
 //! forwarded by the supervisor's reader threads, published by the main loop as
 //! [`LogLine`]s for the live view and probes. Never blocking: a line that finds the queue
-//! full is dropped and counted (the terminal still shows it).
+//! full is dropped (the terminal still shows it).
 
-use crossbeam_channel::{Receiver, Sender, TrySendError};
+use crossbeam_channel::{Receiver, Sender};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::ipc::TopicPublisher;
 use hvs_shared::messages::{LOG_TEXT_LEN, LogLevel, LogLine, NAME_LEN, encode_name};
@@ -36,9 +36,8 @@ impl LineSender {
             text: text.to_string(),
             time_ns: monotonic_ns(),
         };
-        if let Err(TrySendError::Full(_)) = self.tx.try_send(line) {
-            // The main loop is behind; the line is on the terminal anyway.
-        }
+        // Full: the main loop is behind, and the line is on the terminal anyway.
+        let _ = self.tx.try_send(line);
     }
 }
 
