@@ -722,6 +722,66 @@ impl Sequenced for NavMap {
     }
 }
 
+/// Topics one [`BridgeStats`] describes at most.
+pub const MAX_BRIDGE_TOPICS: usize = 16;
+
+/// One topic's traffic through the bridge since it started (96 bytes).
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::BridgeTopicStats")]
+pub struct BridgeTopicStats {
+    /// The topic (`frames/640x480`, or a ROS 2 topic name), NUL-padded.
+    pub topic: [u8; NAME_LEN],
+    /// 0: local to network; 1: network to local.
+    pub direction: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Messages sent (out) or published into shared memory (in).
+    pub messages: u64,
+    /// Bytes of the contract type (before compression).
+    pub raw_bytes: u64,
+    /// Bytes on the wire (payload after compression).
+    pub wire_bytes: u64,
+    /// Messages dropped because the hand-over queue was full (in), or skipped by the rate
+    /// limit (out).
+    pub dropped: u64,
+    /// Messages refused as malformed (in).
+    pub rejected: u64,
+    /// Sender-to-publication time, median of the last second, ns (in; 0 otherwise).
+    pub hop_p50_ns: u64,
+    /// The same, 99th percentile, ns.
+    pub hop_p99_ns: u64,
+}
+
+/// The bridge's traffic, once a second (1 560 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
+#[type_name("hvs::BridgeStats")]
+pub struct BridgeStats {
+    /// Counter of reports from this bridge process.
+    pub seq: u64,
+    /// Time of the report, CLOCK_MONOTONIC ns.
+    pub time_ns: u64,
+    /// zenoh peers (or routers, in client mode) connected now.
+    pub peers: u32,
+    /// Entries used in `topics`.
+    pub topic_count: u32,
+    /// Per topic.
+    pub topics: [BridgeTopicStats; MAX_BRIDGE_TOPICS],
+}
+
+impl Default for BridgeStats {
+    fn default() -> Self {
+        Self::zeroed()
+    }
+}
+
+impl Sequenced for BridgeStats {
+    fn sequence(&self) -> u64 {
+        self.seq
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -730,6 +790,8 @@ mod tests {
     #[test]
     fn sizes_match_docs_ipc_md() {
         assert_eq!(size_of::<FrameHeader>(), 72);
+        assert_eq!(size_of::<BridgeTopicStats>(), 96);
+        assert_eq!(size_of::<BridgeStats>(), 24 + 16 * 96);
         assert_eq!(size_of::<StereoFrame320x240>(), 72 + 2 * 76_800);
         assert_eq!(size_of::<StereoFrame640x480>(), 72 + 2 * 307_200);
         assert_eq!(size_of::<DisparityHeader>(), 72);

@@ -20,6 +20,9 @@
 //!   view: reads frames, disparity, ranges, decisions, actuator/sent, sim/truth, status;
 //!         serves them to Foxglove clients and a web page (WebSocket, loopback by default)
 //!                                                                                        |
+//!   bridge: allow-listed topics <--zenoh (tcp, explicit endpoints)--> another machine's bridge,
+//!           ROS 2 (rmw_zenoh keys, CDR); what it takes in is published here as if local
+//!                                                                                        |
 //!   every stage --heartbeat/<stage>--> supervisor --supervisor/status--> hvs status, probe
 //!   hvs restart / hvs stop --supervisor/control--> supervisor                            |
 //!   serial port (real /dev/ttyUSB0, or the simulator's pty) <----------------------------+
@@ -39,6 +42,7 @@
 //! | `actuator/sent` | [`ActuatorReport`] | actuator (capture in a replay) | decision (dead reckoning), supervisor, view, probe |
 //! | `decision/pose` | [`RobotPose`] | decision | view, probe |
 //! | `decision/map` | [`NavMap`] | decision (a few per second) | view, probe |
+//! | `bridge/stats` | [`BridgeStats`] | bridge (once a second) | probe, tests, `hvs bench bridge` |
 //! | `log` | [`LogLine`] | supervisor (each stage's standard error, line by line) | view, probe |
 //! | `heartbeat/<stage>` | [`StageHeartbeat`] | each stage | supervisor, probe |
 //! | `supervisor/status` | [`SupervisorStatus`] | supervisor | `hvs status`, probe |
@@ -55,9 +59,9 @@
 use core::marker::PhantomData;
 
 use crate::messages::{
-    ActuatorReport, ControlRequest, Decision, DisparityMap320x240, DisparityMap640x480, LogLine,
-    NavMap, RangeReport, RobotPose, SimTruth, StageHeartbeat, StereoFrame320x240,
-    StereoFrame640x480, SupervisorStatus,
+    ActuatorReport, BridgeStats, ControlRequest, Decision, DisparityMap320x240,
+    DisparityMap640x480, LogLine, NavMap, RangeReport, RobotPose, SimTruth, StageHeartbeat,
+    StereoFrame320x240, StereoFrame640x480, SupervisorStatus,
 };
 
 /// Prefix of every hvs service name.
@@ -157,6 +161,8 @@ pub const DECISION_POSE: Topic<RobotPose> = Topic::new("decision/pose");
 pub const NAV_MAP: Topic<NavMap> = Topic::new("decision/map");
 /// What the actuator wrote to the serial port.
 pub const ACTUATOR_SENT: Topic<ActuatorReport> = Topic::new("actuator/sent");
+/// The bridge's traffic per topic, once a second.
+pub const BRIDGE_STATS: Topic<BridgeStats> = Topic::new("bridge/stats");
 /// Per-stage heartbeats: use [`Topic::stage_service_name`] with the stage name.
 pub const HEARTBEAT: Topic<StageHeartbeat> = Topic::new("heartbeat");
 /// The stages' log lines, as the supervisor forwards them (bursts: a deeper queue).
@@ -188,11 +194,13 @@ pub enum Stage {
     Actuator,
     /// The live view: a Foxglove WebSocket server and a web page for an operator.
     View,
+    /// The zenoh bridge to other machines and ROS 2 (on when an endpoint is configured).
+    Bridge,
 }
 
 impl Stage {
     /// Every stage, in start order.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 9] = [
         Stage::Sim,
         Stage::Capture,
         Stage::StereoLo,
@@ -201,6 +209,7 @@ impl Stage {
         Stage::Decision,
         Stage::Actuator,
         Stage::View,
+        Stage::Bridge,
     ];
 
     /// The stage's name (`stereo-lo`, ...).
@@ -214,6 +223,7 @@ impl Stage {
             Stage::Decision => "decision",
             Stage::Actuator => "actuator",
             Stage::View => "view",
+            Stage::Bridge => "bridge",
         }
     }
 
@@ -232,15 +242,16 @@ impl Stage {
             Stage::Decision => "hvs-decision",
             Stage::Actuator => "hvs-actuator",
             Stage::View => "hvs-view",
+            Stage::Bridge => "hvs-bridge",
         }
     }
 }
 
 /// The names of the stages the supervisor knows, in start order ([`Stage::ALL`]'s names).
-pub const STAGE_NAMES: [&str; 8] = {
-    let mut names = [""; 8];
+pub const STAGE_NAMES: [&str; 9] = {
+    let mut names = [""; 9];
     let mut i = 0;
-    while i < 8 {
+    while i < 9 {
         names[i] = Stage::ALL[i].name();
         i += 1;
     }
@@ -301,6 +312,23 @@ pub const STAGE_INPUTS: [StageInput; 6] = [
         topic: DECISIONS.path,
         publisher: Stage::Decision,
     },
+];
+
+/// The stage that publishes each pipeline topic (the table above's publisher column, for the
+/// topics one stage owns): the pre-start check refuses a bridge that would take one of them
+/// from the network while the local stage publishes it too.
+pub const STAGE_PUBLISHERS: [(&str, Stage); 11] = [
+    (SIM_CAMERA.path, Stage::Sim),
+    (SIM_TRUTH.path, Stage::Sim),
+    (FRAMES_LO.path, Stage::Capture),
+    (FRAMES_HI.path, Stage::Capture),
+    (DISPARITY_LO.path, Stage::StereoLo),
+    (DISPARITY_HI.path, Stage::StereoHi),
+    (RANGES.path, Stage::Fusion),
+    (DECISIONS.path, Stage::Decision),
+    (ACTUATOR_SENT.path, Stage::Actuator),
+    (DECISION_POSE.path, Stage::Decision),
+    (NAV_MAP.path, Stage::Decision),
 ];
 
 /// Every fixed topic path with its iceoryx2 payload type name, for discovery by probes.

@@ -376,6 +376,8 @@ pub fn run_pipeline(config: PathBuf, duration: Duration, view: ViewLoad) -> anyh
             report: None,
             replay: None,
             record: None,
+            bridge_listen: Vec::new(),
+            bridge_connect: Vec::new(),
             latency_warm_up: if compare { WARM_UP } else { Duration::ZERO },
         })?;
         let (msgs, bytes) = watcher.map_or((0, 0), Watcher::finish);

@@ -61,6 +61,16 @@ enum Command {
         /// record` records: both pairs, ranges, decisions, actuator output).
         #[arg(long, value_name = "FILE.mcap")]
         record: Option<PathBuf>,
+        /// Start the zenoh bridge listening here, e.g. tcp/127.0.0.1:7447 (added to
+        /// `[bridge] listen`; repeatable). Loopback keeps it on this machine; the robot's
+        /// address lets another computer connect (docs/distributed.md).
+        #[arg(long, value_name = "ENDPOINT")]
+        bridge_listen: Vec<String>,
+        /// Start the zenoh bridge connecting to this peer or router, e.g.
+        /// tcp/192.168.1.20:7447 (added to `[bridge] connect`; repeatable; retried while
+        /// it is down).
+        #[arg(long, value_name = "ENDPOINT")]
+        bridge_connect: Vec<String>,
     },
     /// Check a config without starting anything: the schema, every section's ranges, the
     /// stage graph (a frame source, every enabled stage's inputs published), the stereo
@@ -519,6 +529,8 @@ fn main() -> ExitCode {
             report,
             replay,
             record,
+            bridge_listen,
+            bridge_connect,
         } => (|| {
             let config_path = resolve_config(config)?;
             let duration = duration.map(|d| seconds(d, "--duration")).transpose()?;
@@ -529,6 +541,8 @@ fn main() -> ExitCode {
                 report,
                 replay,
                 record,
+                bridge_listen,
+                bridge_connect,
                 latency_warm_up: std::time::Duration::ZERO,
             })
             .map(|_| ())

@@ -58,6 +58,10 @@ pub struct RunOptions {
     pub replay: Option<PathBuf>,
     /// Record the run (`hvs probe record`'s default topics) from before the first frame.
     pub record: Option<PathBuf>,
+    /// zenoh endpoints the bridge listens on (added to `[bridge] listen`).
+    pub bridge_listen: Vec<String>,
+    /// zenoh endpoints the bridge connects to (added to `[bridge] connect`).
+    pub bridge_connect: Vec<String>,
     /// Latencies of decisions made in the first this-long are left out of the report (the
     /// stages starting up hold most of a short run's tail; benchmarks compare steady states).
     pub latency_warm_up: Duration,
@@ -170,6 +174,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
     if let Some(file) = &replay {
         config.use_replay(file)?;
     }
+    if !opts.bridge_listen.is_empty() || !opts.bridge_connect.is_empty() {
+        config.add_bridge_endpoints(&opts.bridge_listen, &opts.bridge_connect)?;
+    }
     crate::preflight(&config)?;
     let config_path = std::fs::canonicalize(&opts.config_path)
         .with_context(|| format!("cannot resolve {}", opts.config_path.display()))?;
@@ -214,6 +221,17 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunReport> {
         if let Some(file) = &replay {
             spec.args.push("--replay".to_string());
             spec.args.push(file.display().to_string());
+        }
+        // Every stage loads the config itself: each sees the same endpoints (and so the same
+        // stage graph) as the supervisor.
+        for (flag, list) in [
+            ("--bridge-listen", &opts.bridge_listen),
+            ("--bridge-connect", &opts.bridge_connect),
+        ] {
+            for e in list {
+                spec.args.push(flag.to_string());
+                spec.args.push(e.clone());
+            }
         }
         let heartbeat = node.stage_subscriber(&topics::HEARTBEAT, &spec.name, 4)?;
         let program = resolve_program(&bins, &spec.program);

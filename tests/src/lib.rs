@@ -15,6 +15,21 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use serde_json::Value;
 
+/// The stages a default run starts: every stage but the bridge, the last of
+/// [`hvs_runtime::config::STAGE_NAMES`], which starts only with a zenoh endpoint
+/// (tests/tests/distributed.rs runs it).
+pub const DEFAULT_STAGES: [&str; 8] = {
+    let all = hvs_runtime::config::STAGE_NAMES;
+    assert!(all.len() == 9);
+    let mut names = [""; 8];
+    let mut i = 0;
+    while i < 8 {
+        names[i] = all[i];
+        i += 1;
+    }
+    names
+};
+
 /// One pipeline at a time: each uses most of a 2-core machine.
 static PIPELINE_LOCK: Mutex<()> = Mutex::new(());
 static INSTANCE_COUNTER: AtomicU32 = AtomicU32::new(0);
@@ -135,6 +150,14 @@ impl Pipeline {
         p
     }
 
+    /// Starts a second `hvs run` beside one started with [`Pipeline::start`] (whose lock
+    /// covers both): another machine's instance, from the whole config text `config_text`.
+    pub fn start_beside(tag: &str, config_text: &str) -> Self {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::write(dir.path().join("hvs.toml"), config_text).expect("write config");
+        Self::spawn(unique_instance(tag), dir, None)
+    }
+
     /// iceoryx2 files that existed before this pipeline started (taken under the lock).
     pub fn files_before(&self) -> &[String] {
         &self.files_before
@@ -180,6 +203,15 @@ impl Pipeline {
     ) -> Self {
         let config = dir.path().join("hvs.toml");
         std::fs::write(&config, config_text).expect("write config");
+        Self::spawn(instance, dir, Some(serial))
+    }
+
+    fn spawn(
+        instance: String,
+        dir: tempfile::TempDir,
+        serial: Option<MutexGuard<'static, ()>>,
+    ) -> Self {
+        let config = dir.path().join("hvs.toml");
         let stdout = std::fs::File::create(dir.path().join("stdout.log")).expect("log file");
         let stderr = std::fs::File::create(dir.path().join("stderr.log")).expect("log file");
         let child = Command::new(bin("hvs"))
@@ -198,7 +230,7 @@ impl Pipeline {
             dir: Some(dir),
             config,
             child: Some(child),
-            serial: Some(serial),
+            serial,
             files_before: Vec::new(),
         }
     }
@@ -344,6 +376,67 @@ pub fn signal_pid(pid: u32, signal: Signal) {
 }
 
 pub mod psc_peer;
+
+/// A Python 3 (`HVS_PYTHON` if set, else `python3`) that runs `import_check` with
+/// `PYTHONPATH` set to the returned folder: PyPI's `packages` are installed there with pip the
+/// first time (`target/<folder>`). Panics, naming pip's error, when they cannot be installed.
+pub fn python_with(folder: &str, import_check: &str, packages: &[&str]) -> (String, PathBuf) {
+    let python = std::env::var("HVS_PYTHON").unwrap_or_else(|_| "python3".to_string());
+    let site = repo_root().join("target").join(folder);
+    let imports = |python: &str| {
+        Command::new(python)
+            .args(["-c", import_check])
+            .env("PYTHONPATH", &site)
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if !imports(&python) {
+        let pip = |extra: &[&str]| {
+            Command::new(&python)
+                .args([
+                    "-m",
+                    "pip",
+                    "install",
+                    "--quiet",
+                    "--disable-pip-version-check",
+                ])
+                .args(extra)
+                .arg("--target")
+                .arg(&site)
+                .args(packages)
+                .output()
+                .unwrap_or_else(|e| panic!("cannot run {python}: {e} (set HVS_PYTHON)"))
+        };
+        let mut out = pip(&[]);
+        // Debian's python3 refuses installs it does not manage (PEP 668) even into a folder
+        // of our own; the folder is ours, so tell it so.
+        if String::from_utf8_lossy(&out.stderr).contains("externally-managed") {
+            out = pip(&["--break-system-packages"]);
+        }
+        assert!(
+            out.status.success(),
+            "pip install {} into {} failed: {}",
+            packages.join(" "),
+            site.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            imports(&python),
+            "{} installed but `{import_check}` fails",
+            packages.join(" ")
+        );
+    }
+    (python, site)
+}
+
+/// A TCP port free on 127.0.0.1 now (the OS picks it; it stays free unless another process
+/// takes it in the moment before the caller binds it).
+pub fn free_loopback_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free loopback port")
+}
 
 pub use hvs_runtime::ipc::iceoryx_files;
 

@@ -26,50 +26,10 @@ fn example(name: &str) -> std::path::PathBuf {
     path
 }
 
-/// A Python 3 that imports iceoryx2 0.10: `HVS_PYTHON` if set, else `python3` with PyPI's
-/// `iceoryx2==0.10.0` installed once under `target/py-iceoryx2` (pip, from PyPI).
+/// A Python 3 that imports iceoryx2 0.10 (PyPI's, installed once under
+/// `target/py-iceoryx2`; [`hvs_tests::python_with`]).
 fn python_with_iceoryx2() -> (String, std::path::PathBuf) {
-    let python = std::env::var("HVS_PYTHON").unwrap_or_else(|_| "python3".to_string());
-    let site = repo_root().join("target").join("py-iceoryx2");
-    let imports = |python: &str| {
-        Command::new(python)
-            .args(["-c", "import iceoryx2"])
-            .env("PYTHONPATH", &site)
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    if !imports(&python) {
-        let pip = |extra: &[&str]| {
-            Command::new(&python)
-                .args([
-                    "-m",
-                    "pip",
-                    "install",
-                    "--quiet",
-                    "--disable-pip-version-check",
-                ])
-                .args(extra)
-                .arg("--target")
-                .arg(&site)
-                .arg("iceoryx2==0.10.0")
-                .output()
-                .unwrap_or_else(|e| panic!("cannot run {python}: {e} (set HVS_PYTHON)"))
-        };
-        let mut out = pip(&[]);
-        // Debian's python3 refuses installs it does not manage (PEP 668) even into a folder
-        // of our own; the folder is ours, so tell it so.
-        if String::from_utf8_lossy(&out.stderr).contains("externally-managed") {
-            out = pip(&["--break-system-packages"]);
-        }
-        assert!(
-            out.status.success(),
-            "pip install iceoryx2==0.10.0 into {} failed: {}",
-            site.display(),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(imports(&python), "iceoryx2 installed but not importable");
-    }
-    (python, site)
+    hvs_tests::python_with("py-iceoryx2", "import iceoryx2", &["iceoryx2==0.10.0"])
 }
 
 /// Checks the reader's lines: five frames, a real command label, the default policy (2,

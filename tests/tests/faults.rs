@@ -17,7 +17,7 @@ use hvs_tests::{
 use nix::sys::signal::Signal;
 
 const START: Duration = Duration::from_secs(60);
-const STAGES: [&str; 8] = hvs_runtime::config::STAGE_NAMES;
+const STAGES: [&str; 8] = hvs_tests::DEFAULT_STAGES;
 /// How long after a fault the decisions must flow again (the bound the tests hold; the
 /// measured times are printed).
 const RESUME_BOUND: Duration = Duration::from_secs(6);

@@ -18,7 +18,7 @@ fn fixture(name: &str) -> String {
 
 /// Every stage but the one the fixtures stand in for (stereo-hi).
 fn others() -> impl Iterator<Item = &'static str> {
-    hvs_runtime::config::STAGE_NAMES
+    hvs_tests::DEFAULT_STAGES
         .into_iter()
         .filter(|n| *n != "stereo-hi")
 }

@@ -10,7 +10,7 @@ use nix::sys::signal::Signal;
 
 const START: Duration = Duration::from_secs(60);
 /// Every stage of the default (simulator) pipeline.
-const STAGES: [&str; 8] = hvs_runtime::config::STAGE_NAMES;
+const STAGES: [&str; 8] = hvs_tests::DEFAULT_STAGES;
 
 /// Newest decision frame id seen on the pipeline's own topic within `window`.
 fn newest_decision(node: &IpcNode, window: Duration) -> Option<u64> {

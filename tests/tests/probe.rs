@@ -359,7 +359,7 @@ fn probe_commands_show_a_running_pipeline() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains(&format!("instance {instance}")), "{text}");
     assert!(text.contains("last decision #"), "{text}");
-    for stage in hvs_runtime::config::STAGE_NAMES {
+    for stage in hvs_tests::DEFAULT_STAGES {
         assert!(
             text.lines()
                 .any(|l| l.starts_with(&format!("{stage} ")) && l.contains("running")),

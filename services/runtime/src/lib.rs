@@ -8,6 +8,7 @@
 pub mod clock;
 pub mod config;
 pub mod ipc;
+pub mod pacing;
 pub mod stage;
 pub mod stats;
 

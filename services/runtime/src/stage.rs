@@ -54,6 +54,12 @@ pub struct StageArgs {
     /// Replay this MCAP recording instead of the config's frame source (`hvs run --replay`).
     #[arg(long, value_name = "FILE")]
     pub replay: Option<PathBuf>,
+    /// Adds a zenoh listen endpoint to `[bridge] listen` (`hvs run --bridge-listen`).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub bridge_listen: Vec<String>,
+    /// Adds a zenoh connect endpoint to `[bridge] connect` (`hvs run --bridge-connect`).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub bridge_connect: Vec<String>,
 }
 
 fn parse_stage(name: &str) -> Result<Stage, String> {
@@ -213,6 +219,9 @@ impl StageRuntime {
         }
         if let Some(file) = &args.replay {
             config.use_replay(file)?;
+        }
+        if !args.bridge_listen.is_empty() || !args.bridge_connect.is_empty() {
+            config.add_bridge_endpoints(&args.bridge_listen, &args.bridge_connect)?;
         }
         let node = IpcNode::create(&config.instance, stage.name())?;
         let heartbeat = node.stage_publisher(&topics::HEARTBEAT, stage.name())?;

@@ -19,6 +19,6 @@ pub mod encode;
 pub mod health;
 pub mod latest;
 pub mod note;
-pub mod pacing;
+pub use hvs_runtime::pacing;
 pub mod page;
 pub mod worker;

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 mod actuator;
+mod bridge;
 mod camera;
 mod capture;
 mod decision;
@@ -24,6 +25,7 @@ mod supervisor;
 mod view;
 
 pub use actuator::*;
+pub use bridge::*;
 pub use camera::*;
 pub use capture::*;
 pub use decision::*;
@@ -134,6 +136,9 @@ pub struct HvsConfig {
     /// The live view (Foxglove WebSocket server and web page).
     #[serde(default)]
     pub view: ViewConfig,
+    /// The zenoh bridge to other machines and ROS 2.
+    #[serde(default)]
+    pub bridge: BridgeConfig,
     /// Per-stage process settings, keyed by stage name (see [`STAGE_NAMES`]).
     #[serde(default)]
     pub stages: BTreeMap<String, StageOverride>,
@@ -198,6 +203,7 @@ impl HvsConfig {
             ("sim", self.sim.validate()),
             ("robot", self.robot.validate()),
             ("view", self.view.validate()),
+            ("bridge", self.bridge.validate()),
         ];
         // The `[stereo.*]` sections are checked by the matchers' own rules
         // (`hvs_stereo::validate_section`, run by `hvs check`, `hvs run` and `hvs doctor`).
@@ -228,6 +234,21 @@ impl HvsConfig {
     pub fn use_replay(&mut self, file: &Path) -> Result<(), ConfigError> {
         self.capture.source = CaptureSource::Replay;
         self.capture.replay.file = std::path::absolute(file).unwrap_or_else(|_| file.to_path_buf());
+        self.validate()
+    }
+}
+
+impl HvsConfig {
+    /// Adds zenoh endpoints from the command line (`hvs run --bridge-listen/--bridge-connect`)
+    /// to `[bridge]`, which starts the bridge stage unless `[stages.bridge]` disables it, and
+    /// checks the result.
+    pub fn add_bridge_endpoints(
+        &mut self,
+        listen: &[String],
+        connect: &[String],
+    ) -> Result<(), ConfigError> {
+        self.bridge.listen.extend(listen.iter().cloned());
+        self.bridge.connect.extend(connect.iter().cloned());
         self.validate()
     }
 }

@@ -165,7 +165,7 @@ impl HvsConfig {
                     ),
                 ));
             }
-            if self.stage_enabled(input.publisher) {
+            if self.stage_enabled(input.publisher) || self.bridge_delivers(input.topic) {
                 continue;
             }
             let message = if input.stage == Stage::Capture {
@@ -189,6 +189,7 @@ impl HvsConfig {
             };
             return Err(self.invalid(&format!("stages.{}.enabled", input.publisher), message));
         }
+        self.validate_bridge_flow()?;
         if self.stage_enabled(Stage::Actuator) {
             let device = self.actuator.device.trim();
             if device == "sim" && !self.stage_enabled(Stage::Sim) {
@@ -202,12 +203,50 @@ impl HvsConfig {
         Ok(())
     }
 
+    /// Whether the enabled bridge takes `topic` from zenoh into this machine's shared memory.
+    pub fn bridge_delivers(&self, topic: &str) -> bool {
+        self.stage_enabled(Stage::Bridge) && self.bridge.subscribe.iter().any(|t| t.path() == topic)
+    }
+
+    /// The bridge's part of the flow check: it runs with an endpoint, and a topic it takes
+    /// from the network has no local publisher too.
+    fn validate_bridge_flow(&self) -> Result<(), ConfigError> {
+        if !self.stage_enabled(Stage::Bridge) {
+            return Ok(());
+        }
+        if !self.bridge.has_endpoints() {
+            return Err(self.invalid(
+                "bridge.listen",
+                "is empty and so is bridge.connect: the bridge stage needs an endpoint \
+                 (hvs run --bridge-listen tcp/127.0.0.1:7447 or --bridge-connect ENDPOINT)",
+            ));
+        }
+        for t in &self.bridge.subscribe {
+            let local = topics::STAGE_PUBLISHERS
+                .iter()
+                .find(|(path, _)| *path == t.path())
+                .map(|(_, stage)| *stage)
+                .filter(|stage| self.stage_enabled(*stage));
+            if let Some(stage) = local {
+                return Err(self.invalid(
+                    "bridge.subscribe",
+                    format!(
+                        "takes {t} from the network, but the {stage} stage publishes it here \
+                         too; disable [stages.{stage}] or drop {t} from bridge.subscribe"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Whether a stage is enabled (default: all, `sim` only with the sim capture source, and
     /// `actuator` not in a replay).
     pub fn stage_enabled(&self, stage: Stage) -> bool {
         let default = match stage {
             Stage::Sim => self.capture.source == CaptureSource::Sim,
             Stage::Actuator => self.capture.source != CaptureSource::Replay,
+            Stage::Bridge => self.bridge.has_endpoints(),
             _ => true,
         };
         self.stages

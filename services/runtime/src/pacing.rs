@@ -1,4 +1,4 @@
-//! Per-channel rate limits: at most `hz` messages a second, measured on the sample's own
+//! Rate limits (the view's channels, the bridge's topics): at most `hz` messages a second, measured on the sample's own
 //! time stamps so that a burst of queued samples does not all pass.
 
 /// Lets a message through at most every `1 / hz` seconds.
