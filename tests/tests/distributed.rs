@@ -276,8 +276,24 @@ fn malformed_and_unlisted_messages_from_the_network_are_counted_and_dropped() {
         ),
     ];
     let sent = puts.len() as u64;
+    // Reliable and blocking, and only once the robot's subscriber is known here: every
+    // message reaches the robot, so every one must be counted there.
+    let publisher = session
+        .declare_publisher(key)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .wait()
+        .expect("zenoh publisher");
+    let t0 = Instant::now();
+    while !publisher
+        .matching_status()
+        .wait()
+        .is_ok_and(|m| m.matching())
+    {
+        assert!(t0.elapsed() < WAIT, "the robot's subscriber never matched");
+        std::thread::sleep(Duration::from_millis(50));
+    }
     for (what, payload, attachment, encoding) in puts {
-        let mut put = session.put(key, payload).encoding(encoding);
+        let mut put = publisher.put(payload).encoding(encoding);
         if let Some(a) = attachment {
             put = put.attachment(a);
         }
