@@ -14,6 +14,7 @@ use zenoh::bytes::Encoding;
 use zenoh::qos::CongestionControl;
 use zenoh::sample::Locality;
 
+use hvs_runtime::clock::wall_now_ns;
 use hvs_runtime::config::BridgeTopic;
 use hvs_runtime::ipc::{IpcNode, TopicPublisher, TopicSubscriber};
 use hvs_runtime::pacing::RateLimit;
@@ -25,13 +26,6 @@ use hvs_shared::topics::{self, Topic};
 use crate::check::Bridged;
 use crate::queue::{NewestReceiver, newest};
 use crate::wire;
-
-/// Wall-clock now, ns since the Unix epoch (the hop latency is measured across machines).
-pub fn wall_now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
 
 /// Which way a topic crosses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -19,6 +19,13 @@ pub fn elapsed_ns(earlier_ns: u64) -> u64 {
     monotonic_ns().saturating_sub(earlier_ns)
 }
 
+/// `CLOCK_REALTIME` now, ns since the Unix epoch (0 before 1970).
+pub fn wall_now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
 /// Converts `CLOCK_MONOTONIC` stamps to wall-clock (`CLOCK_REALTIME`, Unix epoch) ns, with
 /// the offset between the two clocks read once: what recordings and the live view show
 /// (Foxglove displays dates), while the payloads keep their monotonic stamps.
@@ -31,11 +38,8 @@ pub struct WallClock {
 impl WallClock {
     /// Reads the offset now.
     pub fn now() -> Self {
-        let wall = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as i128);
         Self {
-            offset_ns: wall - i128::from(monotonic_ns()),
+            offset_ns: i128::from(wall_now_ns()) - i128::from(monotonic_ns()),
         }
     }
 
