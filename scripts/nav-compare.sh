@@ -9,7 +9,8 @@
 # SET=maze (the 16 poses of scripts/maze-coverage.sh) or SET=generated (SEEDS, default
 # 1..20); DURATION (seconds, default 300); CONTRAST (e.g. 0.2 for plain walls); POLICIES
 # (default "fuzzy explore"); SCAN_FILTER (fusion.scan_filter for every policy; by default
-# "agreement" for explore and "none" for the others). About 9 minutes per navigator for 20 runs of 300 s on 2 cores.
+# "agreement" for explore and "none" for the others); APPEND (TOML lines appended to every
+# config, e.g. $'[nav.scan_match]\nsearch_m = 0.1' to try a setting). About 9 minutes per navigator for 20 runs of 300 s on 2 cores.
 set -euo pipefail
 BIN=$(realpath -m "${1:-$(dirname "$0")/../target/release/hvs}")
 OUT=$(realpath -m "${2:-$(mktemp -d /tmp/hvs-navcmp.XXXXXX)}")
@@ -31,6 +32,7 @@ for p in $POLICIES; do
   filter=${SCAN_FILTER:-$([ "$p" = explore ] && echo agreement || echo none)}
   sed -e "s/^policy = \"fuzzy\"/policy = \"$p\"/" \
       -e "s/^scan_filter = \"none\"/scan_filter = \"$filter\"/" config/sim.toml > "config/.$TAG-$p.toml"
+  [ -n "${APPEND:-}" ] && printf '\n%s\n' "$APPEND" >> "config/.$TAG-$p.toml"
   grep -q "^policy = \"$p\"" "config/.$TAG-$p.toml" \
     || { echo "nav-compare: could not set policy = \"$p\" in a copy of config/sim.toml" >&2; exit 2; }
   grep -q "^scan_filter = \"$filter\"" "config/.$TAG-$p.toml" \

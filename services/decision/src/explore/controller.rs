@@ -31,6 +31,8 @@ pub struct FootprintCheck {
     half_width_m: f64,
     half_length_m: f64,
     turn_radius_m: f64,
+    /// Margin beyond `turn_radius_m` checked turning, metres.
+    turn_margin_m: f64,
     /// Where the robot turns about for each turn command, metres to the left of its centre:
     /// a skid-steer's turn pulses rarely cancel (the reference's left turn backs at 0.28 m/s
     /// while it turns), so "in place" is a small circle.
@@ -76,8 +78,9 @@ fn body_motion(robot: &RobotConfig, pulses: &PulseTable, pair: PulsePair) -> (f6
 }
 
 impl FootprintCheck {
-    /// The checks for a robot body and its pulse table.
-    pub fn of(robot: &RobotConfig, pulses: &PulseTable) -> Self {
+    /// The checks for a robot body and its pulse table, with `turn_margin_m` checked beyond
+    /// the circle the corners sweep turning.
+    pub fn of(robot: &RobotConfig, pulses: &PulseTable, turn_margin_m: f64) -> Self {
         let pivot = |pair| {
             let (v, w) = body_motion(robot, pulses, pair);
             if w.abs() < 1e-6 { 0.0 } else { v / w }
@@ -86,6 +89,7 @@ impl FootprintCheck {
             half_width_m: 0.5 * robot.width_m,
             half_length_m: 0.5 * robot.length_m,
             turn_radius_m: robot.half_diagonal_m(),
+            turn_margin_m,
             pivot_left_m: (pivot(pulses.left), pivot(pulses.right)),
         }
     }
@@ -171,7 +175,7 @@ impl FootprintCheck {
         } else {
             self.pivot_left_m.1
         };
-        let r = self.turn_radius_m + pivot.abs() + 0.02;
+        let r = self.turn_radius_m + pivot.abs() + self.turn_margin_m;
         let step = 0.5 * grid.cell_m();
         let n = (r / step).ceil() as i64;
         let mut nearest: Option<(f64, f64)> = None;
@@ -246,7 +250,7 @@ impl Controller {
     pub fn new(cfg: ControllerConfig, robot: &RobotConfig, pulses: &PulseTable) -> Self {
         Self {
             cfg,
-            footprint: FootprintCheck::of(robot, pulses),
+            footprint: FootprintCheck::of(robot, pulses, cfg.turn_margin_m),
             mode: Mode::Follow,
             shifts: 0,
         }

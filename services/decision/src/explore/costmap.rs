@@ -1,7 +1,9 @@
 //! The costmap: the occupancy grid inflated by the robot's footprint. Occupied cells and cells
 //! nearer to one than the footprint's half-width plus a clearance are lethal to the robot's
 //! centre; beyond that band the cost falls off over `decay_m`, so paths keep to the middle of
-//! a hallway; unknown cells cost a little extra (they may hold a wall).
+//! a hallway; cells where the robot could stand but not turn in place (nearer than its
+//! half-diagonal plus the clearance) cost `turn_clearance_cost_m` extra; unknown cells cost
+//! a little extra (they may hold a wall).
 //!
 //! Computed over the part of the grid that has been seen (plus a margin), with a two-pass
 //! chamfer distance transform (3-4 weights: within 8 % of the Euclidean distance).
@@ -27,18 +29,21 @@ pub struct Costmap {
     /// Per-cell state.
     state: Vec<CellState>,
     lethal_m: f64,
+    /// Below this distance the robot cannot turn in place, metres.
+    turn_m: f64,
     cfg: CostmapConfig,
     cell_m: f64,
 }
 
 impl Costmap {
-    /// Inflates `grid` for a robot of half-width `half_width_m`; the window covers what has
-    /// been seen and the cell `robot` stands in (which no scan ray of a forward camera
-    /// crosses).
+    /// Inflates `grid` for a robot of half-width `half_width_m` whose corners sweep
+    /// `turn_radius_m` turning in place; the window covers what has been seen and the cell
+    /// `robot` stands in (which no scan ray of a forward camera crosses).
     pub fn build(
         grid: &OccupancyGrid,
         cfg: CostmapConfig,
         half_width_m: f64,
+        turn_radius_m: f64,
         robot: CellIndex,
     ) -> Self {
         let side = grid.side();
@@ -113,6 +118,7 @@ impl Costmap {
             dist_m,
             state,
             lethal_m: half_width_m + cfg.clearance_m,
+            turn_m: turn_radius_m + cfg.clearance_m,
             cfg,
             cell_m,
         }
@@ -179,12 +185,17 @@ impl Costmap {
         } else {
             0.0
         };
+        let turn = if d <= self.turn_m {
+            self.cfg.turn_clearance_cost_m
+        } else {
+            0.0
+        };
         let unknown = if self.state[i] == CellState::Unknown {
             self.cfg.unknown_cost_m
         } else {
             0.0
         };
-        wall + unknown
+        wall + turn + unknown
     }
 
     /// The 8 neighbours of a window cell with their step length in cells.
@@ -228,7 +239,7 @@ mod tests {
             grid.insert(&pts);
         }
         let robot = grid.cell_of(0.0, 0.0).expect("inside");
-        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, robot);
+        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, 0.27, robot);
         let at = |x: f64| {
             grid.cell_of(x, 0.0)
                 .and_then(|c| map.index(c))
@@ -239,5 +250,10 @@ mod tests {
         assert!(!map.is_lethal(at(1.0)));
         assert!(map.cost_m(at(1.4)) > map.cost_m(at(1.0)));
         assert!(map.cost_m(at(1.4)).is_finite());
+        // Standing 0.3 m from the wall's cells fits the footprint's half-width but not the
+        // circle its corners sweep turning: the turn clearance cost applies there only.
+        let turn_cost = CostmapConfig::default().turn_clearance_cost_m;
+        assert!(map.cost_m(at(1.45)) >= turn_cost);
+        assert!(map.cost_m(at(1.0)) < turn_cost);
     }
 }

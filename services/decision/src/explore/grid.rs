@@ -315,21 +315,16 @@ impl OccupancyGrid {
         );
     }
 
-    /// Marks a robot-frame segment from `(ahead_m, left0_m)` to `(ahead_m, left1_m)` occupied
-    /// (a bump: the robot was stopped there by something the camera never saw).
-    pub fn mark_bump(&mut self, pose: &DeadReckonedPose, ahead_m: f64, left_m: (f64, f64)) {
-        for_each_rect_sample(
-            pose,
-            (ahead_m, ahead_m),
-            left_m,
-            0.5 * self.cfg.cell_m,
-            |x, y| {
-                if let Some(cell) = self.cell_of(x, y) {
-                    let now = f64::from(self.log_odds(cell));
-                    self.update(cell, self.cfg.max_log_odds - now);
-                }
-            },
-        );
+    /// Marks the robot-frame rectangle `ahead_m` x `left_m` (each a closed range, metres; a
+    /// segment when one range is a single value) occupied (a bump: the robot was stopped
+    /// there by something the camera never saw).
+    pub fn mark_bump(&mut self, pose: &DeadReckonedPose, ahead_m: (f64, f64), left_m: (f64, f64)) {
+        for_each_rect_sample(pose, ahead_m, left_m, 0.5 * self.cfg.cell_m, |x, y| {
+            if let Some(cell) = self.cell_of(x, y) {
+                let now = f64::from(self.log_odds(cell));
+                self.update(cell, self.cfg.max_log_odds - now);
+            }
+        });
     }
 
     /// Whether a cell index is inside the grid after an offset.

@@ -49,6 +49,11 @@ const BLIND_SCAN_BINS: usize = 4;
 /// A bump is marked this far beyond the footprint's edge, metres (the footprint clearing
 /// leaves occupied cells alone, so the bump stays).
 const BUMP_GAP_M: f64 = 0.12;
+/// After a stalled turn, a bump is marked this far beside the footprint's side, metres
+/// (inside the circle the corners sweep: the half-diagonal is 0.11 m beyond the side).
+const TURN_BUMP_GAP_M: f64 = 0.06;
+/// Stalled turns this near each other are at the same place, metres.
+const TURN_STALL_PLACE_M: f64 = 0.5;
 /// Seconds between retries once no frontier is left.
 const RETRY_S: f64 = 20.0;
 
@@ -74,6 +79,8 @@ pub struct ExploreStatus {
     pub recoveries: u64,
     /// Scans that corrected the pose.
     pub scan_fixes: u64,
+    /// Scans whose point-to-wall alignment corrected the position.
+    pub position_fixes: u64,
     /// Stalls found (the picture unchanged while dead reckoning moved).
     pub stalls: u64,
     /// No reachable frontier is left.
@@ -152,8 +159,13 @@ pub struct Explorer {
     grid: OccupancyGrid,
     controller: Controller,
     half_width_m: f64,
+    /// The circle the footprint's corners sweep turning in place, metres.
+    turn_radius_m: f64,
     camera_forward_m: f64,
     blacklist: Blacklist,
+    /// Frontiers turned to from within `view_m` that were still frontiers afterwards:
+    /// they are driven to next, not looked at again.
+    looked: Blacklist,
     plan: Option<Plan>,
     last_plan_ns: Option<u64>,
     replan_now: bool,
@@ -169,6 +181,8 @@ pub struct Explorer {
     front: Option<FrontMemory>,
     /// The picture against dead reckoning.
     stall: StallCheck,
+    /// Where the last turn in place stalled.
+    last_turn_stall_m: Option<(f64, f64)>,
     /// A stall was found this frame: recover before anything else.
     stalled: bool,
     /// The last command sent.
@@ -189,8 +203,10 @@ impl Explorer {
             grid: OccupancyGrid::new(cfg.grid),
             controller: Controller::new(cfg.controller, robot, pulses),
             half_width_m: 0.5 * robot.width_m,
+            turn_radius_m: robot.half_diagonal_m(),
             camera_forward_m,
             blacklist: Blacklist::default(),
+            looked: Blacklist::default(),
             plan: None,
             last_plan_ns: None,
             replan_now: true,
@@ -202,6 +218,7 @@ impl Explorer {
             started: false,
             front: None,
             stall: StallCheck::default(),
+            last_turn_stall_m: None,
             stalled: false,
             last_command: MotionCommand::Stop,
             status: ExploreStatus::default(),
@@ -274,17 +291,48 @@ impl Explorer {
             return None;
         }
         let points: Vec<(f64, f64)> = self.grid.scan_hits_robot_frame(scan, self.camera_forward_m);
-        let fix = scan_match::align(&self.grid, pose, &points, &self.cfg.scan_match)?;
-        self.status.scan_fixes += 1;
-        let g = self.cfg.scan_match.gain;
-        let fix = PoseCorrection {
-            dx_m: g * fix.dx_m,
-            dy_m: g * fix.dy_m,
-            dheading_rad: g * fix.dheading_rad,
-            overlap: fix.overlap,
+        let cfg = &self.cfg.scan_match;
+        let g = cfg.gain;
+        let searched =
+            scan_match::align(&self.grid, pose, &points, cfg).map(|fix| PoseCorrection {
+                dx_m: g * fix.dx_m,
+                dy_m: g * fix.dy_m,
+                dheading_rad: g * fix.dheading_rad,
+                overlap: fix.overlap,
+            });
+        // The position is refined from where the search put the pose.
+        let mut fix = searched.unwrap_or(PoseCorrection {
+            dx_m: 0.0,
+            dy_m: 0.0,
+            dheading_rad: 0.0,
+            overlap: 0.0,
+        });
+        let searched_pose = DeadReckonedPose {
+            x_m: pose.x_m + fix.dx_m,
+            y_m: pose.y_m + fix.dy_m,
+            heading_rad: pose.heading_rad + fix.dheading_rad,
         };
+        let refined = scan_match::refine_position(&self.grid, &searched_pose, &points, cfg);
+        if let Some(r) = refined {
+            fix.dx_m += r.dx_m;
+            fix.dy_m += r.dy_m;
+            self.status.position_fixes += 1;
+        }
+        if searched.is_none() && refined.is_none() {
+            return None;
+        }
+        self.status.scan_fixes += 1;
         self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);
         Some(fix)
+    }
+
+    /// Tells the explorer of a correction made to the pose outside it (the heading fix from
+    /// the walls' directions): the stall check compares the picture with the motion the
+    /// commands made, and a correction is not motion (measured: a robot standing still while
+    /// the walls' fix and the pose put back by the stall check took turns moving the heading
+    /// 18 degrees found a stall three times a second for 270 s).
+    pub fn corrected(&mut self, dx_m: f64, dy_m: f64, dheading_rad: f64) {
+        self.stall.shift(dx_m, dy_m, dheading_rad);
     }
 
     /// Whether a scan taken at this turn rate can be placed on the grid: while turning fast
@@ -341,18 +389,49 @@ impl Explorer {
             let (l, w) = (half_length_m, half_width_m);
             let stalled_left = match self.last_command {
                 MotionCommand::Forward => {
-                    self.grid.mark_bump(&pose, l + BUMP_GAP_M, (-w, w));
+                    let a = l + BUMP_GAP_M;
+                    self.grid.mark_bump(&pose, (a, a), (-w, w));
                     None
                 }
                 MotionCommand::Reverse => {
-                    self.grid.mark_bump(&pose, -l - BUMP_GAP_M, (-w, w));
+                    let a = -l - BUMP_GAP_M;
+                    self.grid.mark_bump(&pose, (a, a), (-w, w));
                     None
                 }
-                MotionCommand::Left => Some(true),
-                MotionCommand::Right => Some(false),
+                // A turn in place is held mostly by the side its front corner swings
+                // toward (measured over 20 generated mazes: a left turn touched the front
+                // left corner or the left side in most of its collisions): mark that side,
+                // so that the next turn there is checked against it.
+                // Only with the middle window seeing something: a blind picture (a plain wall
+                // filling it) can look unchanged while the robot turns, and a bump beside a
+                // robot that was never held stops every later turn there (measured: three of
+                // 16 plain-wall maze runs stood at their start for 300 s).
+                MotionCommand::Left | MotionCommand::Right => {
+                    let left = self.last_command == MotionCommand::Left;
+                    if input.front_m.is_some() {
+                        let side = if left {
+                            w + TURN_BUMP_GAP_M
+                        } else {
+                            -w - TURN_BUMP_GAP_M
+                        };
+                        self.grid.mark_bump(&pose, (0.0, l), (side, side));
+                    }
+                    Some(left)
+                }
                 MotionCommand::Stop => None,
             };
-            let rin = self.recovery_input(&input);
+            let mut rin = self.recovery_input(&input);
+            if stalled_left.is_some() {
+                // Moving ahead off a stalled turn once per place: a robot that stalls again
+                // there is rubbing along a wall it cannot see, and driving on slides it
+                // along that wall (measured: 30 touches in 60 s).
+                let here = (pose.x_m, pose.y_m);
+                let again = self
+                    .last_turn_stall_m
+                    .is_some_and(|p| (p.0 - here.0).hypot(p.1 - here.1) < TURN_STALL_PLACE_M);
+                rin.ahead_clear &= !again;
+                self.last_turn_stall_m = Some(here);
+            }
             self.recovery = Some(Recovery::after_stall(
                 &self.cfg.recovery,
                 &rin,
@@ -395,7 +474,11 @@ impl Explorer {
         let look = plan.look_at_m;
         let d = (look.0 - pose.x_m).hypot(look.1 - pose.y_m);
         let fcfg = self.cfg.frontier;
-        if d <= fcfg.view_m && d >= fcfg.min_view_m && self.in_sight(&pose, look) {
+        if d <= fcfg.view_m
+            && d >= fcfg.min_view_m
+            && !self.looked.contains(look, fcfg.blacklist_radius_m)
+            && self.in_sight(&pose, look)
+        {
             // Close enough to see it: face it, then take it as seen.
             let towards = [(pose.x_m, pose.y_m), look];
             let control = self.controller.step(
@@ -411,7 +494,12 @@ impl Explorer {
                 control.command,
                 MotionCommand::Forward | MotionCommand::Stop
             ) {
-                self.seen(look);
+                // Faced: if this frame's scan did not resolve it (it lies beyond the scan's
+                // range, or behind something), it is driven to next.
+                self.looked.add(look);
+                self.plan = None;
+                self.replan_now = true;
+                self.controller.reset();
                 return MotionCommand::Stop;
             }
             return control.command;
@@ -463,6 +551,7 @@ impl Explorer {
             distance_m: input.distance_m,
             heading_rad: input.pose.heading_rad,
             behind_clear: fp.behind_clear(&self.grid, &input.pose, 0.05),
+            ahead_clear: fp.ahead_clear(&self.grid, &input.pose, recovery::TURN_STALL_SHIFT_M),
             left_clear,
             right_clear,
         }
@@ -481,7 +570,13 @@ impl Explorer {
             self.status.done = true;
             return None;
         };
-        let map = Costmap::build(&self.grid, self.cfg.costmap, self.half_width_m, robot_cell);
+        let map = Costmap::build(
+            &self.grid,
+            self.cfg.costmap,
+            self.half_width_m,
+            self.turn_radius_m,
+            robot_cell,
+        );
         let Some(start) = map.index(robot_cell) else {
             self.plan = None;
             return None;
@@ -521,6 +616,7 @@ impl Explorer {
             if since >= RETRY_S {
                 self.last_retry_ns = Some(input.now_ns);
                 self.blacklist.clear();
+                self.looked.clear();
                 self.replan_now = true;
                 if self.cfg.recovery.rotate_deg > 0.0 {
                     let mut r = Recovery::look_around(self.cfg.recovery.rotate_deg);

@@ -154,7 +154,7 @@ mod tests {
             }
         }
         let robot = grid.cell_of(0.5, 0.0).expect("inside");
-        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, robot);
+        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, 0.27, robot);
         let idx = |x: f64, y: f64| {
             grid.cell_of(x, y)
                 .and_then(|c| map.index(c))

@@ -2,7 +2,8 @@
 //! window (heading, and x and y when `search_m` is above 0: by default it is 0) for the pose
 //! at which the scan's points fall best on the grid's occupied cells (a brute-force
 //! correlative matcher, as in Olson's real-time correlative scan matching, without the
-//! multi-resolution step: the window is small).
+//! multi-resolution step: the window is small); then, with `position` on, the position is
+//! refined by point-to-wall alignment ([`refine_position`]).
 
 use hvs_runtime::config::ScanMatchConfig;
 
@@ -100,6 +101,171 @@ pub fn align(
     })
 }
 
+/// Occupied cells within this distance of a point's nearest one draw the wall it lies on,
+/// metres.
+const WALL_PATCH_M: f64 = 0.25;
+/// Residuals beyond this weigh less (Huber), metres.
+const HUBER_M: f64 = 0.1;
+/// A patch is a wall, with a direction, when its spread across is under this share of its
+/// spread along (the eigenvalues of its cells' covariance).
+const MAX_FLATNESS: f64 = 0.3;
+
+/// The wall near `q`: the centroid of the occupied cells within [`WALL_PATCH_M`] of the
+/// nearest occupied cell (if one lies within `reach_m`) and the wall's unit normal; `None`
+/// when nothing is near or the cells do not lie along a line (a corner, a pillar).
+fn wall_near(
+    grid: &OccupancyGrid,
+    q: (f64, f64),
+    reach_m: f64,
+) -> Option<((f64, f64), (f64, f64))> {
+    let cell_m = grid.cell_m();
+    let centre = grid.cell_of(q.0, q.1)?;
+    let k = ((reach_m + WALL_PATCH_M) / cell_m).ceil() as i64;
+    let mut occupied: Vec<(f64, f64)> = Vec::new();
+    for dr in -k..=k {
+        for dc in -k..=k {
+            if let Some(cell) = grid.offset(centre, dc, dr)
+                && grid.state(cell) == CellState::Occupied
+            {
+                occupied.push(grid.centre(cell));
+            }
+        }
+    }
+    let d2 = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).powi(2) + (a.1 - b.1).powi(2);
+    let nearest = occupied
+        .iter()
+        .copied()
+        .min_by(|a, b| d2(*a, q).total_cmp(&d2(*b, q)))?;
+    if d2(nearest, q) > reach_m * reach_m {
+        return None;
+    }
+    let patch: Vec<(f64, f64)> = occupied
+        .into_iter()
+        .filter(|&c| d2(c, nearest) <= WALL_PATCH_M * WALL_PATCH_M)
+        .collect();
+    if patch.len() < 3 {
+        return None;
+    }
+    let n = patch.len() as f64;
+    let mean = (
+        patch.iter().map(|p| p.0).sum::<f64>() / n,
+        patch.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in &patch {
+        let (x, y) = (p.0 - mean.0, p.1 - mean.1);
+        sxx += x * x;
+        sxy += x * y;
+        syy += y * y;
+    }
+    let (big, small, along) = sym2_eigen(sxx / n, sxy / n, syy / n);
+    if big <= 0.0 || small > MAX_FLATNESS * big {
+        return None;
+    }
+    Some((mean, (-along.1, along.0)))
+}
+
+/// Eigenvalues (larger, smaller) of the symmetric 2x2 matrix `[[a, b], [b, c]]` and the unit
+/// eigenvector of the larger.
+fn sym2_eigen(a: f64, b: f64, c: f64) -> (f64, f64, (f64, f64)) {
+    let mid = 0.5 * (a + c);
+    let rad = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let (big, small) = (mid + rad, mid - rad);
+    let v = if b.abs() > 1e-12 {
+        (big - c, b)
+    } else if a >= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let len = v.0.hypot(v.1).max(1e-12);
+    (big, small, (v.0 / len, v.1 / len))
+}
+
+/// A position correction found by [`refine_position`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionFix {
+    /// Metres east (grid frame), gain and step limit applied.
+    pub dx_m: f64,
+    /// Metres north.
+    pub dy_m: f64,
+    /// Points that found a wall.
+    pub inliers: usize,
+}
+
+/// Point-to-wall alignment (one Gauss-Newton step of point-to-line ICP against the walls
+/// the grid draws): each scan point within `position_reach_m` of a mapped wall pulls the
+/// position along that wall's normal. The step is taken only along the directions the
+/// walls in view constrain (eigenvectors of the normals' information matrix holding at
+/// least `position_min_points` points): a hallway's walls say nothing about where along it
+/// the robot is, and noise there must not walk the pose. Written by hand: the ICP crates
+/// on crates.io work on point clouds, not on an occupancy grid, and this is forty lines.
+pub fn refine_position(
+    grid: &OccupancyGrid,
+    pose: &DeadReckonedPose,
+    points: &[(f64, f64)],
+    cfg: &ScanMatchConfig,
+) -> Option<PositionFix> {
+    if !cfg.enabled || !cfg.position || points.len() < cfg.min_points as usize {
+        return None;
+    }
+    // Information matrix [[hxx, hxy], [hxy, hyy]] and gradient (bx, by).
+    let (mut hxx, mut hxy, mut hyy, mut bx, mut by) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut inliers = 0;
+    for &p in points {
+        let q = to_grid_frame(pose, p);
+        let Some((on, n)) = wall_near(grid, q, cfg.position_reach_m) else {
+            continue;
+        };
+        let r = n.0 * (q.0 - on.0) + n.1 * (q.1 - on.1);
+        if r.abs() > cfg.position_reach_m {
+            continue;
+        }
+        let w = if r.abs() <= HUBER_M {
+            1.0
+        } else {
+            HUBER_M / r.abs()
+        };
+        hxx += w * n.0 * n.0;
+        hxy += w * n.0 * n.1;
+        hyy += w * n.1 * n.1;
+        bx += w * n.0 * r;
+        by += w * n.1 * r;
+        inliers += 1;
+    }
+    if inliers < cfg.min_points as usize {
+        return None;
+    }
+    let (big, small, e1) = sym2_eigen(hxx, hxy, hyy);
+    let e2 = (-e1.1, e1.0);
+    let min_info = f64::from(cfg.position_min_points);
+    let (mut dx, mut dy) = (0.0, 0.0);
+    let mut constrained = false;
+    for (lambda, e) in [(big, e1), (small, e2)] {
+        if lambda >= min_info {
+            let along = -(e.0 * bx + e.1 * by) / lambda;
+            dx += along * e.0;
+            dy += along * e.1;
+            constrained = true;
+        }
+    }
+    if !constrained {
+        return None;
+    }
+    let (mut dx, mut dy) = (cfg.position_gain * dx, cfg.position_gain * dy);
+    let len = dx.hypot(dy);
+    if len > cfg.position_max_step_m {
+        let k = cfg.position_max_step_m / len;
+        dx *= k;
+        dy *= k;
+    }
+    Some(PositionFix {
+        dx_m: dx,
+        dy_m: dy,
+        inliers,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -145,5 +311,92 @@ mod tests {
         assert!(fix.overlap > 0.5);
         // At the true pose nothing beats it.
         assert_eq!(align(&grid, &pose, &points, &cfg), None);
+    }
+
+    /// Repeats the position refinement from `start` (as the explorer does, once a frame) and
+    /// returns where it ends.
+    fn settle(
+        grid: &OccupancyGrid,
+        start: DeadReckonedPose,
+        points: &[(f64, f64)],
+    ) -> DeadReckonedPose {
+        let cfg = position_on();
+        let mut pose = start;
+        for _ in 0..200 {
+            if let Some(fix) = refine_position(grid, &pose, points, &cfg) {
+                assert!(fix.dx_m.hypot(fix.dy_m) <= cfg.position_max_step_m + 1e-12);
+                pose.x_m += fix.dx_m;
+                pose.y_m += fix.dy_m;
+            }
+        }
+        pose
+    }
+
+    #[test]
+    fn a_drifted_position_is_pulled_back_across_walls_but_not_along_a_hallway() {
+        // Two walls 1.2 m apart along x (a hallway), seen from the origin.
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        let pose = DeadReckonedPose::default();
+        let hallway: Vec<(f64, f64)> = (0..30)
+            .flat_map(|i| {
+                let x = 0.3 + 0.06 * f64::from(i);
+                [(x, 0.62), (x, -0.58)]
+            })
+            .collect();
+        let insert = |grid: &mut OccupancyGrid, pts: &[(f64, f64)]| {
+            for _ in 0..4 {
+                grid.insert(&ScanPointsFor::hits(pts));
+            }
+        };
+        insert(&mut grid, &hallway);
+        // 0.12 m off sideways and 0.3 m along: the sideways error is corrected to within
+        // half a cell, the error along the hallway is left alone.
+        let drifted = DeadReckonedPose {
+            x_m: 0.3,
+            y_m: 0.12,
+            ..pose
+        };
+        let end = settle(&grid, drifted, &hallway);
+        assert!(end.y_m.abs() < 0.05, "{end:?}");
+        assert!((end.x_m - 0.3).abs() < 1e-9, "{end:?}");
+        // A wall across the end of the hallway constrains the other direction too.
+        let mut cross: Vec<(f64, f64)> = hallway.clone();
+        cross.extend((0..20).map(|i| (2.2, -0.55 + 0.06 * f64::from(i))));
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        insert(&mut grid, &cross);
+        let drifted = DeadReckonedPose {
+            x_m: -0.1,
+            y_m: -0.1,
+            ..pose
+        };
+        let end = settle(&grid, drifted, &cross);
+        assert!(end.x_m.abs() < 0.05 && end.y_m.abs() < 0.05, "{end:?}");
+        // Points far from every mapped wall are new surfaces: no correction.
+        let far: Vec<(f64, f64)> = (0..30).map(|i| (1.0 + 0.05 * f64::from(i), 3.0)).collect();
+        assert_eq!(refine_position(&grid, &pose, &far, &position_on()), None);
+        // Off (the default): nothing.
+        assert_eq!(
+            refine_position(&grid, &drifted, &cross, &ScanMatchConfig::default()),
+            None
+        );
+    }
+
+    fn position_on() -> ScanMatchConfig {
+        ScanMatchConfig {
+            position: true,
+            ..ScanMatchConfig::default()
+        }
+    }
+
+    /// Scan points given directly (grid frame), with no rays.
+    struct ScanPointsFor;
+    impl ScanPointsFor {
+        fn hits(pts: &[(f64, f64)]) -> crate::explore::grid::ScanPoints {
+            crate::explore::grid::ScanPoints {
+                camera: (0.0, 0.0),
+                hits: pts.to_vec(),
+                rays: Vec::new(),
+            }
+        }
     }
 }

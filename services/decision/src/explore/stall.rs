@@ -195,4 +195,24 @@ mod tests {
             assert_eq!(s.update(&scan(1.0), &pose(0.0, 0.0)), None);
         }
     }
+
+    #[test]
+    fn heading_corrections_passed_on_are_not_taken_for_motion() {
+        // Standing still while the walls' fix turns the heading by 6 degrees a frame: each
+        // correction passed on with `shift` keeps the check quiet; the same heading change
+        // without it is a stall.
+        let mut s = StallCheck::default();
+        let mut heading = 0.0;
+        for _ in 0..10 {
+            assert_eq!(s.update(&scan(1.0), &pose(0.0, heading)), None);
+            heading += 6.0;
+            s.shift(0.0, 0.0, 6f64.to_radians());
+        }
+        let mut s = StallCheck::default();
+        let stalled = (0..10).any(|k| {
+            s.update(&scan(1.0), &pose(0.0, 6.0 * f64::from(k)))
+                .is_some()
+        });
+        assert!(stalled);
+    }
 }

@@ -345,7 +345,7 @@ impl Navigator {
         if let Some(e) = &self.explorer {
             let s = e.status();
             return format!(
-                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} stalls {}{}{}",
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {}{}{}",
                 e.goal_m()
                     .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
                 s.plans,
@@ -353,6 +353,7 @@ impl Navigator {
                 s.blacklisted,
                 s.recoveries,
                 s.scan_fixes,
+                s.position_fixes,
                 s.stalls,
                 if e.recovering() { " recovering" } else { "" },
                 if s.done { " done" } else { "" },
@@ -433,8 +434,11 @@ impl Navigator {
             let heading = self.odometry.pose().heading_rad;
             let error = (-a - heading + 0.5 * q).rem_euclid(q) - 0.5 * q;
             if error.abs() < HEADING_FIX_MAX_RAD {
-                self.odometry
-                    .correct_heading(self.cfg.heading_fix_gain * error);
+                let fix = self.cfg.heading_fix_gain * error;
+                self.odometry.correct_heading(fix);
+                if let Some(e) = self.explorer.as_mut() {
+                    e.corrected(0.0, 0.0, fix);
+                }
             }
         }
         if let Some(e) = self.explorer.as_mut()
