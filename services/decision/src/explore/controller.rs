@@ -104,6 +104,12 @@ impl FootprintCheck {
         self.half_width_m
     }
 
+    /// Radius of the circle the footprint's corners sweep turning in place about its centre,
+    /// metres.
+    pub fn turn_radius_m(&self) -> f64 {
+        self.turn_radius_m
+    }
+
     /// Counts the samples of the robot-frame rectangle `ahead` x `left` (metres) by state:
     /// (occupied, unknown, all).
     fn rect_count(

@@ -158,9 +158,6 @@ pub struct Explorer {
     cfg: NavConfig,
     grid: OccupancyGrid,
     controller: Controller,
-    half_width_m: f64,
-    /// The circle the footprint's corners sweep turning in place, metres.
-    turn_radius_m: f64,
     camera_forward_m: f64,
     blacklist: Blacklist,
     /// Frontiers turned to from within `view_m` that were still frontiers afterwards:
@@ -202,8 +199,6 @@ impl Explorer {
             cfg,
             grid: OccupancyGrid::new(cfg.grid),
             controller: Controller::new(cfg.controller, robot, pulses),
-            half_width_m: 0.5 * robot.width_m,
-            turn_radius_m: robot.half_diagonal_m(),
             camera_forward_m,
             blacklist: Blacklist::default(),
             looked: Blacklist::default(),
@@ -301,12 +296,7 @@ impl Explorer {
                 overlap: fix.overlap,
             });
         // The position is refined from where the search put the pose.
-        let mut fix = searched.unwrap_or(PoseCorrection {
-            dx_m: 0.0,
-            dy_m: 0.0,
-            dheading_rad: 0.0,
-            overlap: 0.0,
-        });
+        let mut fix = searched.unwrap_or_default();
         let searched_pose = DeadReckonedPose {
             x_m: pose.x_m + fix.dx_m,
             y_m: pose.y_m + fix.dy_m,
@@ -497,9 +487,7 @@ impl Explorer {
                 // Faced: if this frame's scan did not resolve it (it lies beyond the scan's
                 // range, or behind something), it is driven to next.
                 self.looked.add(look);
-                self.plan = None;
-                self.replan_now = true;
-                self.controller.reset();
+                self.drop_plan();
                 return MotionCommand::Stop;
             }
             return control.command;
@@ -523,6 +511,11 @@ impl Explorer {
     /// resolved it, it is gone anyway).
     fn seen(&mut self, p: (f64, f64)) {
         self.blacklist.add(p);
+        self.drop_plan();
+    }
+
+    /// Forgets the goal and any turn toward it, and plans again this frame.
+    fn drop_plan(&mut self) {
         self.plan = None;
         self.replan_now = true;
         self.controller.reset();
@@ -570,11 +563,12 @@ impl Explorer {
             self.status.done = true;
             return None;
         };
+        let fp = self.controller.footprint();
         let map = Costmap::build(
             &self.grid,
             self.cfg.costmap,
-            self.half_width_m,
-            self.turn_radius_m,
+            fp.half_width_m(),
+            fp.turn_radius_m(),
             robot_cell,
         );
         let Some(start) = map.index(robot_cell) else {

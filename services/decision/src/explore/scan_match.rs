@@ -15,7 +15,7 @@ use crate::odometry::DeadReckonedPose;
 const MIN_GAIN: f64 = 0.15;
 
 /// A found correction.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PoseCorrection {
     /// Metres east (grid frame).
     pub dx_m: f64,
@@ -189,8 +189,6 @@ pub struct PositionFix {
     pub dx_m: f64,
     /// Metres north.
     pub dy_m: f64,
-    /// Points that found a wall.
-    pub inliers: usize,
 }
 
 /// Point-to-wall alignment (one Gauss-Newton step of point-to-line ICP against the walls
@@ -259,11 +257,7 @@ pub fn refine_position(
         dx *= k;
         dy *= k;
     }
-    Some(PositionFix {
-        dx_m: dx,
-        dy_m: dy,
-        inliers,
-    })
+    Some(PositionFix { dx_m: dx, dy_m: dy })
 }
 
 #[cfg(test)]
