@@ -18,6 +18,8 @@
 
 pub mod coverage;
 
+mod diagnose;
+
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
 
@@ -373,8 +375,25 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
             }
             poll_t += 0.005;
         }
+        let collisions_before = world.collisions();
         world.advance_to(t + dt);
         let p = world.pose();
+        if trace && let Some(e) = nav.explorer() {
+            let each_second = step % (opts.rate_hz.round().max(1.0) as u64) == 0;
+            let collided = world.collisions() > collisions_before;
+            diagnose::trace(
+                &diagnose::Scene {
+                    map: world.map(),
+                    truth: &p,
+                    believed: &nd.pose,
+                    grid: e.grid(),
+                    robot: &config.robot,
+                },
+                t,
+                each_second,
+                collided,
+            );
+        }
         cells.insert((
             (p.x_m / cell_m).floor() as i64,
             (p.y_m / cell_m).floor() as i64,

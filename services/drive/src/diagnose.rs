@@ -1,0 +1,199 @@
+//! Trace-only (`HVS_DRIVE_TRACE`): for a collision, where the wall that touched the robot
+//! lies in the explorer's grid. The touching wall's points (found on the true map around the
+//! true footprint) are carried into the dead-reckoned frame through the robot's body, so a
+//! wall the grid holds where the robot believes it is reads "occupied": the controller drove
+//! into a known wall; one the grid holds a little aside reads by the distance to the nearest
+//! occupied cell (the map and the pose disagree); one never seen reads "unknown" or "free".
+
+use hvs_decision::explore::grid::OccupancyGrid;
+use hvs_decision::local_map::CellState;
+use hvs_decision::odometry::DeadReckonedPose;
+use hvs_runtime::config::RobotConfig;
+use hvs_sim::{GridMap, Pose};
+
+/// What the diagnosis compares: the true map and pose, the explorer's grid and pose.
+pub struct Scene<'a> {
+    /// The simulated world's map.
+    pub map: &'a GridMap,
+    /// The robot's true pose.
+    pub truth: &'a Pose,
+    /// The pose the explorer believes, on its grid.
+    pub believed: &'a DeadReckonedPose,
+    /// The explorer's occupancy grid.
+    pub grid: &'a OccupancyGrid,
+    /// The robot's body.
+    pub robot: &'a RobotConfig,
+}
+
+/// Prints to stderr, at simulated second `t_s`: with `each_second`, a `consistency` line
+/// (mean distance from the true walls within 1 m to the grid's occupied cells, faces
+/// counted, faces with none near); with `collided`, a `collision` line and a picture.
+pub fn trace(scene: &Scene<'_>, t_s: f64, each_second: bool, collided: bool) {
+    if each_second {
+        let (mean_m, n, unseen) = consistency(scene, 1.0);
+        eprintln!("consistency {t_s:6.2} {mean_m:.3} {n} {unseen}");
+    }
+    if collided {
+        eprintln!("collision {t_s:6.2} {}", collision_line(scene));
+        eprintln!("{}", picture(scene, 1.0));
+    }
+}
+
+/// Margin around the footprint searched for the touching wall, metres.
+const TOUCH_MARGIN_M: f64 = 0.03;
+/// Farthest an occupied cell is looked for around a touching point, metres.
+const SEARCH_M: f64 = 0.5;
+
+/// One line describing the touching wall's points in the grid.
+fn collision_line(scene: &Scene<'_>) -> String {
+    let Scene {
+        map,
+        truth,
+        believed,
+        grid,
+        robot,
+    } = *scene;
+    let hl = 0.5 * robot.length_m + TOUCH_MARGIN_M;
+    let hw = 0.5 * robot.width_m + TOUCH_MARGIN_M;
+    let (ch, sh) = (truth.heading_rad.cos(), truth.heading_rad.sin());
+    let (cb, sb) = (believed.heading_rad.cos(), believed.heading_rad.sin());
+    let mut parts = Vec::new();
+    let n: i32 = 12;
+    for i in -n..=n {
+        for j in -n..=n {
+            // Only the footprint's rim.
+            if i.abs() != n && j.abs() != n {
+                continue;
+            }
+            let a = f64::from(i) / f64::from(n) * hl;
+            let l = f64::from(j) / f64::from(n) * hw;
+            if !map.is_wall_at(truth.x_m + a * ch - l * sh, truth.y_m + a * sh + l * ch) {
+                continue;
+            }
+            let (x, y) = (
+                believed.x_m + a * cb - l * sb,
+                believed.y_m + a * sb + l * cb,
+            );
+            let st = match grid.state_at(x, y) {
+                CellState::Occupied => "occ",
+                CellState::Free => "free",
+                CellState::Unknown => "unk",
+            };
+            let near = nearest_occupied_m(grid, x, y).unwrap_or(f64::INFINITY);
+            parts.push(format!("({a:+.2},{l:+.2}) {st} near {near:.2}"));
+        }
+    }
+    parts.join("; ")
+}
+
+/// Nearest occupied cell of `grid` to a point, up to `SEARCH_M` (`None`: none that near).
+fn nearest_occupied_m(grid: &OccupancyGrid, x: f64, y: f64) -> Option<f64> {
+    let step = 0.5 * grid.cell_m();
+    let k = (SEARCH_M / step).ceil() as i64;
+    let mut nearest: Option<f64> = None;
+    for di in -k..=k {
+        for dj in -k..=k {
+            let (dx, dy) = (di as f64 * step, dj as f64 * step);
+            let d = dx.hypot(dy);
+            if d <= SEARCH_M
+                && nearest.is_none_or(|n| d < n)
+                && grid.state_at(x + dx, y + dy) == CellState::Occupied
+            {
+                nearest = Some(d);
+            }
+        }
+    }
+    nearest
+}
+
+/// How well the grid agrees with the true walls near the robot, as seen from the believed
+/// pose: the true wall faces within `radius_m` of the robot are carried into the believed
+/// frame through the robot's body, and each one's distance to the nearest occupied cell is
+/// averaged (faces with none within `SEARCH_M` are left out: never seen). Returns (mean
+/// distance, faces counted, faces with none near).
+fn consistency(scene: &Scene<'_>, radius_m: f64) -> (f64, usize, usize) {
+    let Scene {
+        map,
+        truth,
+        believed,
+        grid,
+        ..
+    } = *scene;
+    let cell = map.cell_m();
+    let (c0, r0) = map.cell_of(truth.x_m, truth.y_m);
+    let k = (radius_m / cell).ceil() as i64;
+    let (ch, sh) = (truth.heading_rad.cos(), truth.heading_rad.sin());
+    let (cb, sb) = (believed.heading_rad.cos(), believed.heading_rad.sin());
+    let (mut sum, mut n, mut unseen) = (0.0, 0, 0);
+    for c in c0 - k..=c0 + k {
+        for r in r0 - k..=r0 + k {
+            if !map.is_wall_cell(c, r) {
+                continue;
+            }
+            for (dc, dr) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                if map.is_wall_cell(c + dc, r + dr) {
+                    continue;
+                }
+                // The face between the wall cell and its free neighbour.
+                let fx = (c as f64 + 0.5 + 0.5 * dc as f64) * cell;
+                let fy = (r as f64 + 0.5 + 0.5 * dr as f64) * cell;
+                let (ex, ey) = (fx - truth.x_m, fy - truth.y_m);
+                if ex.hypot(ey) > radius_m {
+                    continue;
+                }
+                // Robot frame, then the believed frame.
+                let (a, l) = (ex * ch + ey * sh, -ex * sh + ey * ch);
+                let (x, y) = (
+                    believed.x_m + a * cb - l * sb,
+                    believed.y_m + a * sb + l * cb,
+                );
+                match nearest_occupied_m(grid, x, y) {
+                    Some(d) => {
+                        sum += d;
+                        n += 1;
+                    }
+                    None => unseen += 1,
+                }
+            }
+        }
+    }
+    (if n > 0 { sum / n as f64 } else { 0.0 }, n, unseen)
+}
+
+/// The grid around the believed pose beside the true walls carried into the believed frame,
+/// one character per half cell: `X` both, `#` the grid only, `W` a true wall the grid has
+/// free (`w`: unknown), `o` the footprint, `?` unknown, ` ` free.
+fn picture(scene: &Scene<'_>, half_m: f64) -> String {
+    let (map, truth, believed, grid) = (scene.map, scene.truth, scene.believed, scene.grid);
+    let (length_m, width_m) = (scene.robot.length_m, scene.robot.width_m);
+    let step = 0.5 * grid.cell_m();
+    let k = (half_m / step).ceil() as i64;
+    let (ch, sh) = (truth.heading_rad.cos(), truth.heading_rad.sin());
+    let (cb, sb) = (believed.heading_rad.cos(), believed.heading_rad.sin());
+    let mut out = String::new();
+    for j in (-k..=k).rev() {
+        for i in -k..=k {
+            let (x, y) = (
+                believed.x_m + i as f64 * step,
+                believed.y_m + j as f64 * step,
+            );
+            // Believed frame -> robot frame -> true world.
+            let (ex, ey) = (x - believed.x_m, y - believed.y_m);
+            let (a, l) = (ex * cb + ey * sb, -ex * sb + ey * cb);
+            let wall = map.is_wall_at(truth.x_m + a * ch - l * sh, truth.y_m + a * sh + l * ch);
+            let body = a.abs() <= 0.5 * length_m && l.abs() <= 0.5 * width_m;
+            let c = match (wall, grid.state_at(x, y)) {
+                (true, CellState::Occupied) => 'X',
+                (false, CellState::Occupied) => '#',
+                (true, CellState::Free) => 'W',
+                (true, CellState::Unknown) => 'w',
+                (false, _) if body => 'o',
+                (false, CellState::Unknown) => '?',
+                (false, CellState::Free) => ' ',
+            };
+            out.push(c);
+        }
+        out.push('\n');
+    }
+    out
+}
