@@ -5,7 +5,7 @@
 //! into a known wall; one the grid holds a little aside reads by the distance to the nearest
 //! occupied cell (the map and the pose disagree); one never seen reads "unknown" or "free".
 
-use hvs_decision::explore::grid::OccupancyGrid;
+use hvs_decision::explore::grid::{OccupancyGrid, to_grid_frame};
 use hvs_decision::local_map::CellState;
 use hvs_decision::odometry::DeadReckonedPose;
 use hvs_runtime::config::RobotConfig;
@@ -55,8 +55,6 @@ fn collision_line(scene: &Scene<'_>) -> String {
     } = *scene;
     let hl = 0.5 * robot.length_m + TOUCH_MARGIN_M;
     let hw = 0.5 * robot.width_m + TOUCH_MARGIN_M;
-    let (ch, sh) = (truth.heading_rad.cos(), truth.heading_rad.sin());
-    let (cb, sb) = (believed.heading_rad.cos(), believed.heading_rad.sin());
     let mut parts = Vec::new();
     let n: i32 = 12;
     for i in -n..=n {
@@ -67,13 +65,11 @@ fn collision_line(scene: &Scene<'_>) -> String {
             }
             let a = f64::from(i) / f64::from(n) * hl;
             let l = f64::from(j) / f64::from(n) * hw;
-            if !map.is_wall_at(truth.x_m + a * ch - l * sh, truth.y_m + a * sh + l * ch) {
+            let touched = truth.offset(a, l);
+            if !map.is_wall_at(touched.x_m, touched.y_m) {
                 continue;
             }
-            let (x, y) = (
-                believed.x_m + a * cb - l * sb,
-                believed.y_m + a * sb + l * cb,
-            );
+            let (x, y) = to_grid_frame(believed, (a, l));
             let st = match grid.state_at(x, y) {
                 CellState::Occupied => "occ",
                 CellState::Free => "free",
@@ -123,7 +119,6 @@ fn consistency(scene: &Scene<'_>, radius_m: f64) -> (f64, usize, usize) {
     let (c0, r0) = map.cell_of(truth.x_m, truth.y_m);
     let k = (radius_m / cell).ceil() as i64;
     let (ch, sh) = (truth.heading_rad.cos(), truth.heading_rad.sin());
-    let (cb, sb) = (believed.heading_rad.cos(), believed.heading_rad.sin());
     let (mut sum, mut n, mut unseen) = (0.0, 0, 0);
     for c in c0 - k..=c0 + k {
         for r in r0 - k..=r0 + k {
@@ -143,10 +138,7 @@ fn consistency(scene: &Scene<'_>, radius_m: f64) -> (f64, usize, usize) {
                 }
                 // Robot frame, then the believed frame.
                 let (a, l) = (ex * ch + ey * sh, -ex * sh + ey * ch);
-                let (x, y) = (
-                    believed.x_m + a * cb - l * sb,
-                    believed.y_m + a * sb + l * cb,
-                );
+                let (x, y) = to_grid_frame(believed, (a, l));
                 match nearest_occupied_m(grid, x, y) {
                     Some(d) => {
                         sum += d;
@@ -168,7 +160,6 @@ fn picture(scene: &Scene<'_>, half_m: f64) -> String {
     let (length_m, width_m) = (scene.robot.length_m, scene.robot.width_m);
     let step = 0.5 * grid.cell_m();
     let k = (half_m / step).ceil() as i64;
-    let (ch, sh) = (truth.heading_rad.cos(), truth.heading_rad.sin());
     let (cb, sb) = (believed.heading_rad.cos(), believed.heading_rad.sin());
     let mut out = String::new();
     for j in (-k..=k).rev() {
@@ -180,7 +171,8 @@ fn picture(scene: &Scene<'_>, half_m: f64) -> String {
             // Believed frame -> robot frame -> true world.
             let (ex, ey) = (x - believed.x_m, y - believed.y_m);
             let (a, l) = (ex * cb + ey * sb, -ex * sb + ey * cb);
-            let wall = map.is_wall_at(truth.x_m + a * ch - l * sh, truth.y_m + a * sh + l * ch);
+            let there = truth.offset(a, l);
+            let wall = map.is_wall_at(there.x_m, there.y_m);
             let body = a.abs() <= 0.5 * length_m && l.abs() <= 0.5 * width_m;
             let c = match (wall, grid.state_at(x, y)) {
                 (true, CellState::Occupied) => 'X',
