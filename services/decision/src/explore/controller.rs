@@ -4,7 +4,8 @@
 //! the robot in place until it is within `aligned_deg` (stopping early by the turn rate times
 //! the command latency), otherwise it drives ahead. Every motion is checked against the
 //! occupancy grid with the robot's footprint first: ahead, the swept rectangle; turning, the
-//! circle its corners sweep.
+//! circle its corners sweep, checked again every frame of the turn (the camera sees new
+//! ground as the robot turns).
 
 use hvs_runtime::config::{ControllerConfig, PulsePair, PulseTable, RobotConfig};
 use hvs_shared::messages::MotionCommand;
@@ -209,8 +210,9 @@ impl FootprintCheck {
 enum Mode {
     /// Driving along the path (or standing, when told to).
     Follow,
-    /// Turning in place toward the path (`left`: counter-clockwise).
-    Turn { left: bool },
+    /// Turning in place toward the path (`left`: counter-clockwise); `disc_clear`: the
+    /// turning disc held no occupied cell when the turn began.
+    Turn { left: bool, disc_clear: bool },
 }
 
 /// What the controller decided.
@@ -315,7 +317,14 @@ impl Controller {
             blocked,
             heading_error_rad: error,
         };
-        if let Mode::Turn { left } = self.mode {
+        if let Mode::Turn { left, disc_clear } = self.mode {
+            // The camera sees new ground as the robot turns: a wall that shows up in the
+            // disc it sweeps stops a turn begun on a clear disc (the path is then followed
+            // afresh: shift off it, or turn anyway once boxed in).
+            if disc_clear && self.footprint.turn_blocked(grid, &pose, left).is_some() {
+                self.mode = Mode::Follow;
+                return out(MotionCommand::Stop, false);
+            }
             let lead = input.turn_rate_rad_s.abs() * self.cfg.turn_lead_s;
             let still_to_go = if left { error } else { -error };
             if still_to_go - lead > self.cfg.aligned_deg.to_radians() {
@@ -329,7 +338,8 @@ impl Controller {
         }
         if error.abs() > self.cfg.turn_above_deg.to_radians() {
             let left = error > 0.0;
-            if let Some(ahead) = self.footprint.turn_blocked(grid, &pose, left)
+            let blocked = self.footprint.turn_blocked(grid, &pose, left);
+            if let Some(ahead) = blocked
                 && self.shifts < MAX_SHIFTS
             {
                 // Something in the turning disc: move away from it first.
@@ -344,7 +354,10 @@ impl Controller {
                 // Boxed in: turn anyway, the shortest way.
             }
             self.shifts = 0;
-            self.mode = Mode::Turn { left };
+            self.mode = Mode::Turn {
+                left,
+                disc_clear: blocked.is_none(),
+            };
             return out(turn_command(left), false);
         }
         if self.may_drive_ahead(grid, &pose, self.cfg.check_ahead_m, input.front_m) {
@@ -504,6 +517,44 @@ mod tests {
             });
         }
         assert_eq!(c.step(&grid, i).command, MotionCommand::Stop);
+    }
+
+    #[test]
+    fn a_wall_seen_in_the_turning_disc_mid_turn_stops_the_turn() {
+        let mut grid = open_grid();
+        let mut c = default_controller();
+        let left = [(0.0, 0.0), (0.0, 1.0)];
+        let start = DeadReckonedPose::default();
+        assert_eq!(
+            c.step(&grid, input(start, &left)).command,
+            MotionCommand::Left
+        );
+        let half = DeadReckonedPose {
+            heading_rad: 40f64.to_radians(),
+            ..start
+        };
+        assert_eq!(
+            c.step(&grid, input(half, &left)).command,
+            MotionCommand::Left
+        );
+        // The turn brings a wall into view 0.28 m ahead-left of the centre: inside the disc
+        // the corners sweep.
+        grid.mark_bump(&half, (0.25, 0.25), (0.12, 0.12));
+        assert_eq!(
+            c.step(&grid, input(half, &left)).command,
+            MotionCommand::Stop
+        );
+        // A turn begun boxed in (no shift left) is not stopped by what it already knew.
+        let mut boxed = default_controller();
+        boxed.shifts = MAX_SHIFTS;
+        assert_eq!(
+            boxed.step(&grid, input(half, &left)).command,
+            MotionCommand::Left
+        );
+        assert_eq!(
+            boxed.step(&grid, input(half, &left)).command,
+            MotionCommand::Left
+        );
     }
 
     #[test]

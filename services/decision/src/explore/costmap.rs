@@ -3,7 +3,9 @@
 //! centre; beyond that band the cost falls off over `decay_m`, so paths keep to the middle of
 //! a hallway; cells where the robot could stand but not turn in place (nearer than its
 //! half-diagonal plus the clearance) cost `turn_clearance_cost_m` extra; unknown cells cost
-//! a little extra (they may hold a wall).
+//! a little extra (they may hold a wall), and so do seen cells near unknown ones
+//! (`unknown_clearance_cost_m`: the wall ends the robot touched were mostly never mapped,
+//! their side toward the robot lying in the camera's blind zone).
 //!
 //! Computed over the part of the grid that has been seen (plus a margin), with a two-pass
 //! chamfer distance transform (3-4 weights: within 8 % of the Euclidean distance).
@@ -26,6 +28,8 @@ pub struct Costmap {
     rows: usize,
     /// Distance to the nearest occupied cell, metres (capped).
     dist_m: Vec<f32>,
+    /// Distance to the nearest unknown cell, metres (capped).
+    unknown_dist_m: Vec<f32>,
     /// Per-cell state.
     state: Vec<CellState>,
     lethal_m: f64,
@@ -63,59 +67,14 @@ impl Costmap {
                 state.push(grid.state((c, r)));
             }
         }
-        // Chamfer distance in thirds of a cell (3 straight, 4 diagonal).
-        const FAR: u32 = u32::MAX / 2;
-        let mut d: Vec<u32> = state
-            .iter()
-            .map(|&s| if s == CellState::Occupied { 0 } else { FAR })
-            .collect();
-        for r in 0..rows {
-            for c in 0..cols {
-                let i = r * cols + c;
-                let mut v = d[i];
-                if c > 0 {
-                    v = v.min(d[i - 1] + 3);
-                }
-                if r > 0 {
-                    v = v.min(d[i - cols] + 3);
-                    if c > 0 {
-                        v = v.min(d[i - cols - 1] + 4);
-                    }
-                    if c + 1 < cols {
-                        v = v.min(d[i - cols + 1] + 4);
-                    }
-                }
-                d[i] = v;
-            }
-        }
-        for r in (0..rows).rev() {
-            for c in (0..cols).rev() {
-                let i = r * cols + c;
-                let mut v = d[i];
-                if c + 1 < cols {
-                    v = v.min(d[i + 1] + 3);
-                }
-                if r + 1 < rows {
-                    v = v.min(d[i + cols] + 3);
-                    if c + 1 < cols {
-                        v = v.min(d[i + cols + 1] + 4);
-                    }
-                    if c > 0 {
-                        v = v.min(d[i + cols - 1] + 4);
-                    }
-                }
-                d[i] = v;
-            }
-        }
-        let dist_m = d
-            .iter()
-            .map(|&v| (f64::from(v.min(3000)) / 3.0 * cell_m) as f32)
-            .collect();
+        let dist_m = chamfer_m(&state, cols, rows, cell_m, |s| s == CellState::Occupied);
+        let unknown_dist_m = chamfer_m(&state, cols, rows, cell_m, |s| s == CellState::Unknown);
         Self {
             origin: (c0, r0),
             cols,
             rows,
             dist_m,
+            unknown_dist_m,
             state,
             lethal_m: half_width_m + cfg.clearance_m,
             turn_m: turn_radius_m + cfg.clearance_m,
@@ -195,7 +154,14 @@ impl Costmap {
         } else {
             0.0
         };
-        wall + turn + unknown
+        let du = f64::from(self.unknown_dist_m[i]);
+        let near_unknown = if du >= self.turn_m {
+            0.0
+        } else {
+            let span = (self.turn_m - self.lethal_m).max(1e-9);
+            self.cfg.unknown_clearance_cost_m * ((self.turn_m - du) / span).min(1.0)
+        };
+        wall + turn + unknown + near_unknown
     }
 
     /// The 8 neighbours of a window cell with their step length in cells.
@@ -219,6 +185,64 @@ impl Costmap {
     }
 }
 
+/// Distance from every window cell to the nearest cell whose state is `seed`, metres
+/// (capped at 1000 cells): a two-pass chamfer transform in thirds of a cell (3 straight, 4
+/// diagonal).
+fn chamfer_m(
+    state: &[CellState],
+    cols: usize,
+    rows: usize,
+    cell_m: f64,
+    seed: impl Fn(CellState) -> bool,
+) -> Vec<f32> {
+    const FAR: u32 = u32::MAX / 2;
+    let mut d: Vec<u32> = state
+        .iter()
+        .map(|&s| if seed(s) { 0 } else { FAR })
+        .collect();
+    for r in 0..rows {
+        for c in 0..cols {
+            let i = r * cols + c;
+            let mut v = d[i];
+            if c > 0 {
+                v = v.min(d[i - 1] + 3);
+            }
+            if r > 0 {
+                v = v.min(d[i - cols] + 3);
+                if c > 0 {
+                    v = v.min(d[i - cols - 1] + 4);
+                }
+                if c + 1 < cols {
+                    v = v.min(d[i - cols + 1] + 4);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for r in (0..rows).rev() {
+        for c in (0..cols).rev() {
+            let i = r * cols + c;
+            let mut v = d[i];
+            if c + 1 < cols {
+                v = v.min(d[i + 1] + 3);
+            }
+            if r + 1 < rows {
+                v = v.min(d[i + cols] + 3);
+                if c + 1 < cols {
+                    v = v.min(d[i + cols + 1] + 4);
+                }
+                if c > 0 {
+                    v = v.min(d[i + cols - 1] + 4);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    d.iter()
+        .map(|&v| (f64::from(v.min(3000)) / 3.0 * cell_m) as f32)
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -226,18 +250,25 @@ mod tests {
     use hvs_runtime::config::GridConfig;
     use hvs_shared::messages::ObstacleScan;
 
-    #[test]
-    fn cells_near_a_wall_are_lethal_and_cost_falls_with_distance() {
+    /// A grid after three looks east from the origin by a camera `camera_forward_m` ahead
+    /// of it, every bin reading `range_m`.
+    fn looked_east(range_m: f32, camera_forward_m: f64) -> OccupancyGrid {
         let mut grid = OccupancyGrid::new(GridConfig::default());
         let mut scan = ObstacleScan {
             tan_half_fov: 0.5,
             ..ObstacleScan::default()
         };
-        scan.range_m = [1.5; hvs_shared::messages::SCAN_BINS];
+        scan.range_m = [range_m; hvs_shared::messages::SCAN_BINS];
         for _ in 0..3 {
-            let pts = grid.scan_points(&DeadReckonedPose::default(), 0.2, &scan);
+            let pts = grid.scan_points(&DeadReckonedPose::default(), camera_forward_m, &scan);
             grid.insert(&pts);
         }
+        grid
+    }
+
+    #[test]
+    fn cells_near_a_wall_are_lethal_and_cost_falls_with_distance() {
+        let grid = looked_east(1.5, 0.2);
         let robot = grid.cell_of(0.0, 0.0).expect("inside");
         let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, 0.27, robot);
         let at = |x: f64| {
@@ -255,5 +286,44 @@ mod tests {
         let turn_cost = CostmapConfig::default().turn_clearance_cost_m;
         assert!(map.cost_m(at(1.45)) >= turn_cost);
         assert!(map.cost_m(at(1.0)) < turn_cost);
+    }
+
+    #[test]
+    fn seen_cells_beside_unknown_ones_cost_more_than_the_middle_of_what_was_seen() {
+        // One look east with nothing within range: a cone seen free, unknown all round it.
+        let grid = looked_east(5.0, 0.0);
+        let robot = grid.cell_of(0.0, 0.0).expect("inside");
+        let cfg = CostmapConfig::default();
+        let map = Costmap::build(&grid, cfg, 0.155, 0.27, robot);
+        let at = |x: f64, y: f64| {
+            grid.cell_of(x, y)
+                .and_then(|c| map.index(c))
+                .expect("inside the window")
+        };
+        // The cone is 1.2 m wide 1.2 m out: its middle is far from the unknown.
+        assert_eq!(map.state(at(1.2, 0.0)), CellState::Free);
+        assert!(map.cost_m(at(1.2, 0.0)) < 1e-9);
+        // A cell seen free next to the cone's edge costs the whole clearance cost; one a
+        // little farther in, part of it; an unknown cell, that and the unknown cost.
+        let edge = at(1.2, 0.6);
+        assert_eq!(map.state(edge), CellState::Free);
+        assert!((map.cost_m(edge) - cfg.unknown_clearance_cost_m).abs() < 1e-9);
+        let part = map.cost_m(at(1.2, 0.4));
+        assert!(part > 0.0 && part < map.cost_m(edge));
+        let outside = at(1.2, 0.8);
+        assert_eq!(map.state(outside), CellState::Unknown);
+        assert!(map.cost_m(outside) > map.cost_m(edge));
+        // With the cost set to 0 the middle and the edge cost the same.
+        let flat = Costmap::build(
+            &grid,
+            CostmapConfig {
+                unknown_clearance_cost_m: 0.0,
+                ..cfg
+            },
+            0.155,
+            0.27,
+            robot,
+        );
+        assert!(flat.cost_m(edge) < 1e-9);
     }
 }

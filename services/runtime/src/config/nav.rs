@@ -222,6 +222,12 @@ pub struct CostmapConfig {
     pub wall_cost_m: f64,
     /// Extra cost of crossing an unknown cell, in metres of path per cell.
     pub unknown_cost_m: f64,
+    /// Extra cost of a seen cell nearer to an unknown one than the footprint's half-width
+    /// plus `clearance_m`, in metres of path per cell, falling to 0 at the half-diagonal
+    /// plus `clearance_m`: the camera looks ahead only, so a wall end beside the way (in its
+    /// blind zone) is often unknown, never occupied; paths keep to the middle of what was
+    /// seen.
+    pub unknown_clearance_cost_m: f64,
     /// Extra cost of a cell where the robot could stand but not turn in place (an occupied
     /// cell within the footprint's half-diagonal plus `clearance_m`: Nav2's "possibly
     /// inscribed" band), in metres of path per cell: paths keep where turns fit.
@@ -235,6 +241,7 @@ impl Default for CostmapConfig {
             decay_m: 0.35,
             wall_cost_m: 0.6,
             unknown_cost_m: 0.05,
+            unknown_clearance_cost_m: 1.0,
             turn_clearance_cost_m: 1.0,
         }
     }
@@ -249,6 +256,12 @@ impl CostmapConfig {
                 ("decay_m", self.decay_m, 0.0, 3.0),
                 ("wall_cost_m", self.wall_cost_m, 0.0, 100.0),
                 ("unknown_cost_m", self.unknown_cost_m, 0.0, 100.0),
+                (
+                    "unknown_clearance_cost_m",
+                    self.unknown_clearance_cost_m,
+                    0.0,
+                    100.0,
+                ),
                 (
                     "turn_clearance_cost_m",
                     self.turn_clearance_cost_m,
