@@ -14,11 +14,6 @@ use super::grid::{OccupancyGrid, for_each_rect_sample, to_grid_frame};
 use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 
-/// Side margin of the swept rectangle beyond the footprint, metres.
-const SWEEP_MARGIN_M: f64 = 0.03;
-/// Largest share of the swept rectangle ahead that may be unknown for driving ahead.
-const MAX_UNKNOWN_AHEAD: f64 = 0.25;
-
 /// Wraps an angle to (-pi, pi].
 pub fn wrap_rad(a: f64) -> f64 {
     use std::f64::consts::{PI, TAU};
@@ -34,6 +29,10 @@ pub struct FootprintCheck {
     turn_radius_m: f64,
     /// Margin beyond `turn_radius_m` checked turning, metres.
     turn_margin_m: f64,
+    /// Side margin of the swept rectangles beyond the footprint, metres.
+    sweep_margin_m: f64,
+    /// Largest share of a swept rectangle that may be unknown for "seen clear".
+    max_unknown_share: f64,
     /// Where the robot turns about for each turn command, metres to the left of its centre:
     /// a skid-steer's turn pulses rarely cancel (the reference's left turn backs at 0.28 m/s
     /// while it turns), so "in place" is a small circle.
@@ -56,11 +55,6 @@ impl SweptArea {
             unknown_share: unknown as f64 / all.max(1) as f64,
         }
     }
-
-    /// No occupied cell and mostly cells seen free.
-    pub fn seen_clear(&self) -> bool {
-        self.occupied == 0 && self.unknown_share <= MAX_UNKNOWN_AHEAD
-    }
 }
 
 /// Body speed and turn rate for a pulse pair, from the wheel model the dead reckoning uses.
@@ -79,9 +73,9 @@ fn body_motion(robot: &RobotConfig, pulses: &PulseTable, pair: PulsePair) -> (f6
 }
 
 impl FootprintCheck {
-    /// The checks for a robot body and its pulse table, with `turn_margin_m` checked beyond
-    /// the circle the corners sweep turning.
-    pub fn of(robot: &RobotConfig, pulses: &PulseTable, turn_margin_m: f64) -> Self {
+    /// The checks for a robot body and its pulse table, with the controller's margins
+    /// (`turn_margin_m` beyond the circle the corners sweep turning).
+    pub fn of(robot: &RobotConfig, pulses: &PulseTable, cfg: &ControllerConfig) -> Self {
         let pivot = |pair| {
             let (v, w) = body_motion(robot, pulses, pair);
             if w.abs() < 1e-6 { 0.0 } else { v / w }
@@ -90,9 +84,16 @@ impl FootprintCheck {
             half_width_m: 0.5 * robot.width_m,
             half_length_m: 0.5 * robot.length_m,
             turn_radius_m: robot.half_diagonal_m(),
-            turn_margin_m,
+            turn_margin_m: cfg.turn_margin_m,
+            sweep_margin_m: cfg.sweep_margin_m,
+            max_unknown_share: cfg.max_unknown_ahead_share,
             pivot_left_m: (pivot(pulses.left), pivot(pulses.right)),
         }
+    }
+
+    /// No occupied cell in `swept` and mostly cells seen free.
+    pub fn seen_clear(&self, swept: &SweptArea) -> bool {
+        swept.occupied == 0 && swept.unknown_share <= self.max_unknown_share
     }
 
     /// Half the footprint's length, metres.
@@ -141,7 +142,7 @@ impl FootprintCheck {
         pose: &DeadReckonedPose,
         ahead_m: f64,
     ) -> SweptArea {
-        let w = self.half_width_m + SWEEP_MARGIN_M;
+        let w = self.half_width_m + self.sweep_margin_m;
         SweptArea::of(self.rect_count(
             grid,
             pose,
@@ -152,21 +153,20 @@ impl FootprintCheck {
 
     /// Whether driving `ahead_m` forward sweeps no occupied cell and mostly cells seen free.
     pub fn ahead_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, ahead_m: f64) -> bool {
-        self.ahead_swept(grid, pose, ahead_m).seen_clear()
+        self.seen_clear(&self.ahead_swept(grid, pose, ahead_m))
     }
 
     /// Whether backing up `back_m` sweeps no occupied cell and mostly cells seen free (the
     /// camera never sees behind: what is known there is the way the robot came, which the
     /// grid clears under its footprint, and walls seen before the robot turned).
     pub fn behind_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, back_m: f64) -> bool {
-        let w = self.half_width_m + SWEEP_MARGIN_M;
-        SweptArea::of(self.rect_count(
+        let w = self.half_width_m + self.sweep_margin_m;
+        self.seen_clear(&SweptArea::of(self.rect_count(
             grid,
             pose,
             (-self.half_length_m - back_m, -self.half_length_m),
             (-w, w),
-        ))
-        .seen_clear()
+        )))
     }
 
     /// Whether the disc the footprint sweeps turning (`left` or right) holds an occupied
@@ -236,10 +236,6 @@ pub struct Controller {
     shifts: u32,
 }
 
-/// Shifts to clear the turning disc before turning anyway (a disc blocked both ways would
-/// otherwise rock the robot back and forth).
-const MAX_SHIFTS: u32 = 6;
-
 /// What the controller sees this frame.
 #[derive(Debug, Clone, Copy)]
 pub struct ControlInput<'a> {
@@ -258,7 +254,7 @@ impl Controller {
     pub fn new(cfg: ControllerConfig, robot: &RobotConfig, pulses: &PulseTable) -> Self {
         Self {
             cfg,
-            footprint: FootprintCheck::of(robot, pulses, cfg.turn_margin_m),
+            footprint: FootprintCheck::of(robot, pulses, &cfg),
             mode: Mode::Follow,
             shifts: 0,
         }
@@ -340,7 +336,7 @@ impl Controller {
             let left = error > 0.0;
             let blocked = self.footprint.turn_blocked(grid, &pose, left);
             if let Some(ahead) = blocked
-                && self.shifts < MAX_SHIFTS
+                && self.shifts < self.cfg.max_shifts
             {
                 // Something in the turning disc: move away from it first.
                 if ahead && self.footprint.behind_clear(grid, &pose, 0.1) {
@@ -382,7 +378,8 @@ impl Controller {
         if swept.occupied > 0 || !self.front_open(front_m) {
             return false;
         }
-        swept.seen_clear() || front_m.is_some_and(|m| m >= self.cfg.stop_range_m + ahead_m)
+        self.footprint.seen_clear(&swept)
+            || front_m.is_some_and(|m| m >= self.cfg.stop_range_m + ahead_m)
     }
 
     fn front_open(&self, front_m: Option<f64>) -> bool {
@@ -546,7 +543,7 @@ mod tests {
         );
         // A turn begun boxed in (no shift left) is not stopped by what it already knew.
         let mut boxed = default_controller();
-        boxed.shifts = MAX_SHIFTS;
+        boxed.shifts = boxed.cfg.max_shifts;
         assert_eq!(
             boxed.step(&grid, input(half, &left)).command,
             MotionCommand::Left

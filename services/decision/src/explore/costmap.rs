@@ -40,6 +40,11 @@ pub struct Costmap {
 }
 
 impl Costmap {
+    /// Extra cost of a cell crossed while leaving a lethal start, metres per cell.
+    pub fn escape_cost_m(&self) -> f64 {
+        self.cfg.escape_cost_m
+    }
+
     /// Inflates `grid` for a robot of half-width `half_width_m` whose corners sweep
     /// `turn_radius_m` turning in place; the window covers what has been seen and the cell
     /// `robot` stands in (which no scan ray of a forward camera crosses).

@@ -12,15 +12,6 @@ use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
 use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 
-/// A ray stops marking free this share of its length before its point (a ray that meets a
-/// wall at a slant runs beside it for its last stretch and would clear it).
-const FREE_MARGIN: f64 = 0.1;
-
-/// Neighbouring bins agree when their depths differ by at most this share of the depth ...
-const SUPPORT_REL: f64 = 0.1;
-/// ... plus this, metres.
-const SUPPORT_M: f64 = 0.05;
-
 /// A cell index: column (x) and row (y).
 pub type CellIndex = (usize, usize);
 
@@ -178,7 +169,7 @@ impl OccupancyGrid {
                 .flatten()
                 .any(|j| {
                     let n = f64::from(r[j]);
-                    n > 0.0 && (n - d).abs() <= SUPPORT_REL * d + SUPPORT_M
+                    n > 0.0 && (n - d).abs() <= self.cfg.support_share * d + self.cfg.support_m
                 })
         };
         let mut out = Vec::with_capacity(SCAN_BINS);
@@ -232,7 +223,7 @@ impl OccupancyGrid {
                 hits.push(g);
                 rays.push((
                     dir,
-                    (dist * (1.0 - FREE_MARGIN)).min(dist - self.cfg.cell_m),
+                    (dist * (1.0 - self.cfg.free_margin_share)).min(dist - self.cfg.cell_m),
                 ));
             } else {
                 rays.push((dir, self.cfg.scan_range_m));

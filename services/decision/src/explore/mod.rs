@@ -42,21 +42,6 @@ use recovery::{ProgressChecker, Recovery, RecoveryInput};
 pub use scan_match::PoseCorrection;
 use stall::StallCheck;
 
-/// Extra cost of a frontier whose centre lies in the camera's blind zone, metres.
-const BLIND_FRONTIER_COST_M: f64 = 2.0;
-/// A scan with fewer valid bins than this, and no front range, is blind.
-const BLIND_SCAN_BINS: usize = 4;
-/// A bump is marked this far beyond the footprint's edge, metres (the footprint clearing
-/// leaves occupied cells alone, so the bump stays).
-const BUMP_GAP_M: f64 = 0.12;
-/// After a stalled turn, a bump is marked this far beside the footprint's side, metres
-/// (inside the circle the corners sweep: the half-diagonal is 0.11 m beyond the side).
-const TURN_BUMP_GAP_M: f64 = 0.06;
-/// Stalled turns this near each other are at the same place, metres.
-const TURN_STALL_PLACE_M: f64 = 0.5;
-/// Seconds between retries once no frontier is left.
-const RETRY_S: f64 = 20.0;
-
 /// The goal being driven to and the path there.
 #[derive(Debug, Clone)]
 struct Plan {
@@ -106,9 +91,6 @@ pub struct ExploreInput<'a> {
     pub now_ns: u64,
 }
 
-/// Turning more than this since the front was last seen makes that range stale, radians.
-const FRONT_MEMORY_TURN_RAD: f64 = 0.26;
-
 /// The last range the middle window read, and the pose it was read from: a wall the robot
 /// drives up to leaves the matcher's range (the camera is blind closer than `max_disp`'s
 /// depth), and the dead-reckoned distance driven since says how near it now is.
@@ -120,11 +102,12 @@ struct FrontMemory {
 
 impl FrontMemory {
     /// The front range now: this frame's, or the remembered one less the way driven
-    /// toward it while facing the same way (`None`: nothing known).
+    /// toward it while facing the same way, within `stale_turn_rad` (`None`: nothing known).
     fn front_m(
         memory: &mut Option<Self>,
         seen_m: Option<f64>,
         pose: &DeadReckonedPose,
+        stale_turn_rad: f64,
     ) -> Option<f64> {
         if let Some(m) = seen_m {
             *memory = Some(Self {
@@ -134,7 +117,7 @@ impl FrontMemory {
             return Some(m);
         }
         let m = (*memory)?;
-        if wrap_rad(pose.heading_rad - m.pose.heading_rad).abs() > FRONT_MEMORY_TURN_RAD {
+        if wrap_rad(pose.heading_rad - m.pose.heading_rad).abs() > stale_turn_rad {
             *memory = None;
             return None;
         }
@@ -146,10 +129,11 @@ impl FrontMemory {
 
 /// Whether the picture says a wall nearer than the matcher's shortest range (or one without
 /// texture) fills it: nothing in view, or more of the middle third's bins scattered
-/// ([`hvs_shared::messages::SCAN_SCATTERED`]) than ranged.
-fn blind(scan: &ObstacleScan) -> bool {
+/// ([`hvs_shared::messages::SCAN_SCATTERED`]) than ranged; "nothing": fewer than `min_bins`
+/// valid bins.
+fn blind(scan: &ObstacleScan, min_bins: u32) -> bool {
     let (valid, scattered) = scan.valid_and_scattered(SCAN_BINS / 3..2 * SCAN_BINS / 3);
-    scan.valid_bins() < BLIND_SCAN_BINS || scattered > valid
+    scan.valid_bins() < min_bins as usize || scattered > valid
 }
 
 /// The exploring navigator's state.
@@ -212,7 +196,7 @@ impl Explorer {
             last_retry_ns: None,
             started: false,
             front: None,
-            stall: StallCheck::default(),
+            stall: StallCheck::new(cfg.stall),
             last_turn_stall_m: None,
             stalled: false,
             last_command: MotionCommand::Stop,
@@ -345,8 +329,13 @@ impl Explorer {
 
     fn motion(&mut self, input: ExploreInput<'_>) -> MotionCommand {
         let pose = input.pose;
-        let mut front_m = FrontMemory::front_m(&mut self.front, input.front_m, &pose);
-        if front_m.is_none() && blind(input.scan) {
+        let mut front_m = FrontMemory::front_m(
+            &mut self.front,
+            input.front_m,
+            &pose,
+            self.cfg.controller.front_memory_turn_rad,
+        );
+        if front_m.is_none() && blind(input.scan, self.cfg.controller.blind_scan_bins) {
             // Not a way to drive into.
             front_m = Some(0.0);
         }
@@ -367,7 +356,10 @@ impl Explorer {
         if !self.started {
             self.started = true;
             if self.cfg.recovery.start_spin_deg > 0.0 {
-                self.recovery = Some(Recovery::look_around(self.cfg.recovery.start_spin_deg));
+                self.recovery = Some(Recovery::look_around(
+                    &self.cfg.recovery,
+                    self.cfg.recovery.start_spin_deg,
+                ));
             }
         }
         if self.stalled {
@@ -379,12 +371,12 @@ impl Explorer {
             let (l, w) = (half_length_m, half_width_m);
             let stalled_left = match self.last_command {
                 MotionCommand::Forward => {
-                    let a = l + BUMP_GAP_M;
+                    let a = l + self.cfg.recovery.bump_gap_m;
                     self.grid.mark_bump(&pose, (a, a), (-w, w));
                     None
                 }
                 MotionCommand::Reverse => {
-                    let a = -l - BUMP_GAP_M;
+                    let a = -l - self.cfg.recovery.bump_gap_m;
                     self.grid.mark_bump(&pose, (a, a), (-w, w));
                     None
                 }
@@ -400,9 +392,9 @@ impl Explorer {
                     let left = self.last_command == MotionCommand::Left;
                     if input.front_m.is_some() {
                         let side = if left {
-                            w + TURN_BUMP_GAP_M
+                            w + self.cfg.recovery.turn_bump_gap_m
                         } else {
-                            -w - TURN_BUMP_GAP_M
+                            -w - self.cfg.recovery.turn_bump_gap_m
                         };
                         self.grid.mark_bump(&pose, (0.0, l), (side, side));
                     }
@@ -416,9 +408,9 @@ impl Explorer {
                 // there is rubbing along a wall it cannot see, and driving on slides it
                 // along that wall (measured: 30 touches in 60 s).
                 let here = (pose.x_m, pose.y_m);
-                let again = self
-                    .last_turn_stall_m
-                    .is_some_and(|p| (p.0 - here.0).hypot(p.1 - here.1) < TURN_STALL_PLACE_M);
+                let again = self.last_turn_stall_m.is_some_and(|p| {
+                    (p.0 - here.0).hypot(p.1 - here.1) < self.cfg.recovery.turn_stall_place_m
+                });
                 rin.ahead_clear &= !again;
                 self.last_turn_stall_m = Some(here);
             }
@@ -544,7 +536,11 @@ impl Explorer {
             distance_m: input.distance_m,
             heading_rad: input.pose.heading_rad,
             behind_clear: fp.behind_clear(&self.grid, &input.pose, 0.05),
-            ahead_clear: fp.ahead_clear(&self.grid, &input.pose, recovery::TURN_STALL_SHIFT_M),
+            ahead_clear: fp.ahead_clear(
+                &self.grid,
+                &input.pose,
+                self.cfg.recovery.turn_stall_shift_m,
+            ),
             left_clear,
             right_clear,
         }
@@ -596,7 +592,11 @@ impl Explorer {
             // A frontier in the blind zone cannot be seen from here: drive away and back.
             let blind = (p.0 - pose.x_m).hypot(p.1 - pose.y_m) < fcfg.min_view_m;
             fcfg.turn_weight * turn.abs() - if kept { keep } else { 0.0 }
-                + if blind { BLIND_FRONTIER_COST_M } else { 0.0 }
+                + if blind {
+                    self.cfg.frontier.blind_cost_m
+                } else {
+                    0.0
+                }
         };
         let chosen = choose(&frontiers, &fcfg, map.cell_m(), &self.blacklist, extra_cost).cloned();
         let Some(f) = chosen else {
@@ -607,13 +607,14 @@ impl Explorer {
             let since = self.last_retry_ns.map_or(f64::INFINITY, |t| {
                 input.now_ns.saturating_sub(t) as f64 * 1e-9
             });
-            if since >= RETRY_S {
+            if since >= self.cfg.frontier.retry_s {
                 self.last_retry_ns = Some(input.now_ns);
                 self.blacklist.clear();
                 self.looked.clear();
                 self.replan_now = true;
                 if self.cfg.recovery.rotate_deg > 0.0 {
-                    let mut r = Recovery::look_around(self.cfg.recovery.rotate_deg);
+                    let mut r =
+                        Recovery::look_around(&self.cfg.recovery, self.cfg.recovery.rotate_deg);
                     let cmd = r.step(&self.recovery_input(input));
                     self.recovery = Some(r);
                     return cmd;
@@ -677,17 +678,17 @@ mod tests {
             range_m: [1.5; SCAN_BINS],
             ..ObstacleScan::default()
         };
-        assert!(!blind(&scan));
+        assert!(!blind(&scan, 4));
         // The middle third scattered (a wall nearer than the matcher sees), the sides
         // ranged: blind.
         scan.range_m[SCAN_BINS / 3..2 * SCAN_BINS / 3].fill(SCAN_SCATTERED);
-        assert!(blind(&scan));
+        assert!(blind(&scan, 4));
         // Scattered sides only: the middle still vouches for the way ahead.
         scan.range_m = [1.5; SCAN_BINS];
         scan.range_m[..SCAN_BINS / 3].fill(SCAN_SCATTERED);
-        assert!(!blind(&scan));
+        assert!(!blind(&scan, 4));
         // Nothing at all: blind.
-        assert!(blind(&ObstacleScan::default()));
+        assert!(blind(&ObstacleScan::default(), 4));
     }
 
     #[test]
@@ -698,24 +699,30 @@ mod tests {
             y_m: 0.0,
             heading_rad: heading_deg.to_radians(),
         };
-        assert_eq!(FrontMemory::front_m(&mut memory, None, &at(0.0, 0.0)), None);
         assert_eq!(
-            FrontMemory::front_m(&mut memory, Some(0.8), &at(0.0, 0.0)),
+            FrontMemory::front_m(&mut memory, None, &at(0.0, 0.0), 0.26),
+            None
+        );
+        assert_eq!(
+            FrontMemory::front_m(&mut memory, Some(0.8), &at(0.0, 0.0), 0.26),
             Some(0.8)
         );
         // Blind now: 0.5 m driven toward it leaves 0.3 m.
-        let left = FrontMemory::front_m(&mut memory, None, &at(0.5, 2.0)).unwrap_or(9.0);
+        let left = FrontMemory::front_m(&mut memory, None, &at(0.5, 2.0), 0.26).unwrap_or(9.0);
         assert!((left - 0.3).abs() < 0.01, "{left}");
         // Driven past it: 0, never negative.
         assert_eq!(
-            FrontMemory::front_m(&mut memory, None, &at(1.0, 0.0)),
+            FrontMemory::front_m(&mut memory, None, &at(1.0, 0.0), 0.26),
             Some(0.0)
         );
         // Turned away: nothing known.
         assert_eq!(
-            FrontMemory::front_m(&mut memory, None, &at(1.0, 40.0)),
+            FrontMemory::front_m(&mut memory, None, &at(1.0, 40.0), 0.26),
             None
         );
-        assert_eq!(FrontMemory::front_m(&mut memory, None, &at(1.0, 0.0)), None);
+        assert_eq!(
+            FrontMemory::front_m(&mut memory, None, &at(1.0, 0.0), 0.26),
+            None
+        );
     }
 }

@@ -40,9 +40,6 @@ impl PartialOrd for Entry {
     }
 }
 
-/// Extra cost of a cell crossed while escaping a lethal start, metres per cell.
-const ESCAPE_COST_M: f64 = 1.0;
-
 impl CostField {
     /// Runs Dijkstra from window cell `start`.
     pub fn from_start(map: &Costmap, start: usize) -> Self {
@@ -56,6 +53,7 @@ impl CostField {
             cell: start,
         });
         let cell_m = map.cell_m();
+        let escape_cost_m = map.escape_cost_m();
         while let Some(Entry { cost: c, cell }) = heap.pop() {
             if c > cost[cell] {
                 continue;
@@ -71,7 +69,7 @@ impl CostField {
                     {
                         continue;
                     }
-                    len * (cell_m + ESCAPE_COST_M)
+                    len * (cell_m + escape_cost_m)
                 } else {
                     len * cell_m + map.cost_m(next)
                 };

@@ -97,7 +97,7 @@ pub struct RecoveryInput {
     pub heading_rad: f64,
     /// Backing up is clear.
     pub behind_clear: bool,
-    /// Driving ahead [`TURN_STALL_SHIFT_M`] is clear (no wall, mostly seen free).
+    /// Driving ahead `turn_stall_shift_m` is clear (no wall, mostly seen free).
     pub ahead_clear: bool,
     /// The disc the footprint sweeps turning left holds no seen obstacle.
     pub left_clear: bool,
@@ -105,34 +105,19 @@ pub struct RecoveryInput {
     pub right_clear: bool,
 }
 
-/// Rotations are cut into steps of at most this much with a pause after each, so that the
-/// scans taken while standing enter the map (scans taken while turning fast do not).
-const ROTATE_STEP_RAD: f64 = 0.8;
-/// The pause after a rotation step, seconds.
-const ROTATE_PAUSE_S: f64 = 0.35;
-
-/// After a turn in place stalled with the way ahead seen clear, the robot first drives this
-/// far ahead, metres: a robot turning in place is held by something its rear or its
-/// side sweeps, which the forward camera never saw (measured: a robot 0.22 m from the
-/// wall behind it in a 0.88 m corridor, whose corners sweep 0.27 m, turned against that
-/// wall, waited and turned again for 270 s), and moving ahead takes it off.
-pub const TURN_STALL_SHIFT_M: f64 = 0.12;
-
-/// A behaviour that has not ended by odometry after this long ends anyway (odometry that
-/// does not advance, with no actuator reports, must not hold the robot in it), seconds.
-const BEHAVIOUR_LIMIT_S: f64 = 5.0;
-
 /// A running sequence of behaviours.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Recovery {
     steps: Vec<Behaviour>,
     /// When the current step must end.
     deadline_ns: Option<u64>,
+    /// How long a step may run before it ends anyway (`behaviour_limit_s`), nanoseconds.
+    limit_ns: u64,
 }
 
-/// Rotation steps of `total_rad`, each followed by a pause.
-fn rotation(total_rad: f64, left: bool) -> Vec<Behaviour> {
-    let n = (total_rad / ROTATE_STEP_RAD).ceil().max(1.0) as usize;
+/// Rotation steps of `total_rad`, each at most `rotate_step_rad` and followed by a pause.
+fn rotation(cfg: &RecoveryConfig, total_rad: f64, left: bool) -> Vec<Behaviour> {
+    let n = (total_rad / cfg.rotate_step_rad).ceil().max(1.0) as usize;
     let mut out = Vec::with_capacity(2 * n);
     for _ in 0..n {
         out.push(Behaviour::Rotate {
@@ -141,7 +126,7 @@ fn rotation(total_rad: f64, left: bool) -> Vec<Behaviour> {
             start_rad: None,
         });
         out.push(Behaviour::Wait {
-            wait_s: ROTATE_PAUSE_S,
+            wait_s: cfg.rotate_pause_s,
             until_ns: None,
         });
     }
@@ -160,21 +145,27 @@ impl Recovery {
         }
         if cfg.rotate_deg > 0.0 {
             let left = input.left_clear || !input.right_clear;
-            steps.extend(rotation(cfg.rotate_deg.to_radians(), left));
+            steps.extend(rotation(cfg, cfg.rotate_deg.to_radians(), left));
         }
         steps.push(Behaviour::Wait {
             wait_s: cfg.wait_s,
             until_ns: None,
         });
         steps.reverse();
+        Self::of(cfg, steps)
+    }
+
+    /// A sequence of `steps`, the first last.
+    fn of(cfg: &RecoveryConfig, steps: Vec<Behaviour>) -> Self {
         Self {
             steps,
             deadline_ns: None,
+            limit_ns: (cfg.behaviour_limit_s * 1e9) as u64,
         }
     }
 
     /// After a stall (the robot pinned while it moved): a stalled turn with the way ahead
-    /// clear drives ahead [`TURN_STALL_SHIFT_M`] and pauses; otherwise back up when clear
+    /// clear drives ahead `turn_stall_shift_m` and pauses; otherwise back up when clear
     /// behind, then rotate away from the turn that stalled (`stalled_left`; `None`: it was
     /// not turning, rotate toward the freer side), then wait.
     pub fn after_stall(
@@ -185,19 +176,19 @@ impl Recovery {
         if stalled_left.is_some() && input.ahead_clear {
             // A turn held by something unseen beside or behind: move off it, then let the
             // controller turn again from there.
-            return Self {
-                steps: vec![
+            return Self::of(
+                cfg,
+                vec![
                     Behaviour::Wait {
-                        wait_s: ROTATE_PAUSE_S,
+                        wait_s: cfg.rotate_pause_s,
                         until_ns: None,
                     },
                     Behaviour::Forward {
-                        distance_m: TURN_STALL_SHIFT_M,
+                        distance_m: cfg.turn_stall_shift_m,
                         until_m: None,
                     },
                 ],
-                deadline_ns: None,
-            };
+            );
         }
         let mut r = Self::start(cfg, input);
         if let Some(was_left) = stalled_left {
@@ -211,13 +202,10 @@ impl Recovery {
     }
 
     /// A look around: rotate in place by `degrees` counter-clockwise, pausing on the way.
-    pub fn look_around(degrees: f64) -> Self {
-        let mut steps = rotation(degrees.to_radians(), true);
+    pub fn look_around(cfg: &RecoveryConfig, degrees: f64) -> Self {
+        let mut steps = rotation(cfg, degrees.to_radians(), true);
         steps.reverse();
-        Self {
-            steps,
-            deadline_ns: None,
-        }
+        Self::of(cfg, steps)
     }
 
     /// The behaviour running now.
@@ -228,11 +216,9 @@ impl Recovery {
     /// The command for this frame, or `None` once the sequence is over.
     pub fn step(&mut self, input: &RecoveryInput) -> Option<MotionCommand> {
         while let Some(b) = self.steps.last_mut() {
-            let deadline = *self.deadline_ns.get_or_insert(
-                input
-                    .now_ns
-                    .saturating_add((BEHAVIOUR_LIMIT_S * 1e9) as u64),
-            );
+            let deadline = *self
+                .deadline_ns
+                .get_or_insert(input.now_ns.saturating_add(self.limit_ns));
             let command = match b {
                 Behaviour::BackUp {
                     distance_m,
@@ -352,7 +338,7 @@ mod tests {
         input.behind_clear = false;
         let r = Recovery::start(&cfg, &input);
         assert!(matches!(r.behaviour(), Some(Behaviour::Rotate { .. })));
-        let mut look = Recovery::look_around(360.0);
+        let mut look = Recovery::look_around(&RecoveryConfig::default(), 360.0);
         assert_eq!(look.step(&input), Some(MotionCommand::Left));
         // Heading that never changes: each rotation step ends at its time limit.
         let mut steps = 0;
@@ -388,7 +374,7 @@ mod tests {
                 other => panic!("unexpected {other:?}"),
             }
         }
-        assert_eq!(forwards, (TURN_STALL_SHIFT_M / 0.02).ceil() as usize);
+        assert_eq!(forwards, (cfg.turn_stall_shift_m / 0.02).ceil() as usize);
         // The way ahead not clear: rotate away from the stalled turn.
         input.ahead_clear = false;
         let mut r = Recovery::after_stall(&cfg, &input, Some(true));

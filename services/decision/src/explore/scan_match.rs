@@ -11,9 +11,6 @@ use super::grid::{OccupancyGrid, to_grid_frame};
 use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 
-/// Share by which the best pose's score must beat the dead-reckoned pose's.
-const MIN_GAIN: f64 = 0.15;
-
 /// A found correction.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PoseCorrection {
@@ -90,7 +87,7 @@ pub fn align(
     let overlap = on as f64 / points.len() as f64;
     // A better fit must be clearly better: among near-equal fits the noise picks one, and
     // following it would walk the pose at random.
-    if overlap < cfg.min_overlap || s <= base * (1.0 + MIN_GAIN) + 1e-9 {
+    if overlap < cfg.min_overlap || s <= base * (1.0 + cfg.min_gain_share) + 1e-9 {
         return None;
     }
     Some(PoseCorrection {
@@ -101,26 +98,19 @@ pub fn align(
     })
 }
 
-/// Occupied cells within this distance of a point's nearest one draw the wall it lies on,
-/// metres.
-const WALL_PATCH_M: f64 = 0.25;
-/// Residuals beyond this weigh less (Huber), metres.
-const HUBER_M: f64 = 0.1;
-/// A patch is a wall, with a direction, when its spread across is under this share of its
-/// spread along (the eigenvalues of its cells' covariance).
-const MAX_FLATNESS: f64 = 0.3;
-
-/// The wall near `q`: the centroid of the occupied cells within [`WALL_PATCH_M`] of the
-/// nearest occupied cell (if one lies within `reach_m`) and the wall's unit normal; `None`
-/// when nothing is near or the cells do not lie along a line (a corner, a pillar).
+/// The wall near `q`: the centroid of the occupied cells within `wall_patch_m` of the
+/// nearest occupied cell (if one lies within `position_reach_m`) and the wall's unit
+/// normal; `None` when nothing is near or the cells do not lie along a line (a corner, a
+/// pillar: flatter than `max_flatness`).
 fn wall_near(
     grid: &OccupancyGrid,
     q: (f64, f64),
-    reach_m: f64,
+    cfg: &ScanMatchConfig,
 ) -> Option<((f64, f64), (f64, f64))> {
+    let reach_m = cfg.position_reach_m;
     let cell_m = grid.cell_m();
     let centre = grid.cell_of(q.0, q.1)?;
-    let k = ((reach_m + WALL_PATCH_M) / cell_m).ceil() as i64;
+    let k = ((reach_m + cfg.wall_patch_m) / cell_m).ceil() as i64;
     let mut occupied: Vec<(f64, f64)> = Vec::new();
     for dr in -k..=k {
         for dc in -k..=k {
@@ -141,7 +131,7 @@ fn wall_near(
     }
     let patch: Vec<(f64, f64)> = occupied
         .into_iter()
-        .filter(|&c| d2(c, nearest) <= WALL_PATCH_M * WALL_PATCH_M)
+        .filter(|&c| d2(c, nearest) <= cfg.wall_patch_m * cfg.wall_patch_m)
         .collect();
     if patch.len() < 3 {
         return None;
@@ -159,7 +149,7 @@ fn wall_near(
         syy += y * y;
     }
     let (big, small, along) = sym2_eigen(sxx / n, sxy / n, syy / n);
-    if big <= 0.0 || small > MAX_FLATNESS * big {
+    if big <= 0.0 || small > cfg.max_flatness * big {
         return None;
     }
     Some((mean, (-along.1, along.0)))
@@ -212,17 +202,17 @@ pub fn refine_position(
     let mut inliers = 0;
     for &p in points {
         let q = to_grid_frame(pose, p);
-        let Some((on, n)) = wall_near(grid, q, cfg.position_reach_m) else {
+        let Some((on, n)) = wall_near(grid, q, cfg) else {
             continue;
         };
         let r = n.0 * (q.0 - on.0) + n.1 * (q.1 - on.1);
         if r.abs() > cfg.position_reach_m {
             continue;
         }
-        let w = if r.abs() <= HUBER_M {
+        let w = if r.abs() <= cfg.huber_m {
             1.0
         } else {
-            HUBER_M / r.abs()
+            cfg.huber_m / r.abs()
         };
         hxx += w * n.0 * n.0;
         hxy += w * n.0 * n.1;

@@ -7,19 +7,11 @@
 //! Written here rather than shared with the fuzzy policy's wedge detector, which watches its
 //! three windows and acts on its own maneuvers; this one watches the scan bins the grid uses.
 
+use hvs_runtime::config::StallConfig;
 use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
 
 use super::controller::wrap_rad;
 use crate::odometry::DeadReckonedPose;
-
-/// Bins valid in both scans needed to compare them.
-const MIN_COMMON_BINS: usize = 16;
-/// The scan is unchanged when the median relative range change is below this.
-const SAME_REL: f64 = 0.03;
-/// Dead-reckoned travel since the scan last changed that must change it, metres ...
-const MOVED_M: f64 = 0.2;
-/// ... or turn, radians (20 degrees: about 24 of the 64 bins over a 53 degree view).
-const TURNED_RAD: f64 = 0.35;
 
 /// The scan and pose where the picture last changed.
 #[derive(Debug, Clone, Copy)]
@@ -28,28 +20,16 @@ struct Anchor {
     pose: DeadReckonedPose,
 }
 
-/// Dead-reckoned turn while the scan stays too empty to compare that means the robot is held,
-/// radians. A turn held by a wall the camera faces from nearer than the matcher's shortest
-/// range sees nothing the whole time, and dead reckoning turned on 170 degrees (measured on
-/// generated maze 4: every later collision of that run followed from it); a free turn
-/// brings something into view well before this (textured walls: 40 degrees at most in the
-/// traces; plain walls leave the range windows blind for longer, but kept 16 bins or more
-/// in view: over the 16 plain-wall maze runs this never fired).
-const BLIND_TURNED_RAD: f64 = 1.57;
-
-/// Watches the scan against dead reckoning.
+/// Watches the scan against dead reckoning (its limits: `[nav.stall]`; the blind-turn limit
+/// never fired over the 16 plain-wall maze runs, whose windows stay blind for longest, as
+/// they kept 16 bins or more in view).
 #[derive(Debug, Clone, Default)]
 pub struct StallCheck {
+    cfg: StallConfig,
     anchor: Option<Anchor>,
     /// The pose where the scan became too empty to compare, while it stays so.
     blind_from: Option<DeadReckonedPose>,
 }
-
-/// Bins valid in both scans needed to compare their middle thirds.
-const MIN_COMMON_MIDDLE_BINS: usize = 6;
-/// Middle bins farther than this are not compared for a drive, metres: 0.2 m is then at
-/// least 10 % of their range.
-const MIDDLE_RANGE_M: f32 = 2.0;
 
 /// Median relative change between two scans over the bins in `bins` valid in both and
 /// nearer than `max_m` (`None`: fewer than `min_bins`).
@@ -74,6 +54,14 @@ fn median_change(
 }
 
 impl StallCheck {
+    /// A check with the limits of `cfg`.
+    pub fn new(cfg: StallConfig) -> Self {
+        Self {
+            cfg,
+            ..Self::default()
+        }
+    }
+
     /// Moves the remembered pose by a correction applied to dead reckoning this frame (the
     /// pose put back after a stall is then in the corrected frame).
     pub fn shift(&mut self, dx_m: f64, dy_m: f64, dheading_rad: f64) {
@@ -90,25 +78,26 @@ impl StallCheck {
         }
     }
 
-    /// Whether dead reckoning turned past [`BLIND_TURNED_RAD`] while the scan showed too
+    /// Whether dead reckoning turned past `blind_turned_rad` while the scan showed too
     /// little to compare: then the pose where it went blind.
     fn blind_turn(
         &mut self,
         scan: &ObstacleScan,
         pose: &DeadReckonedPose,
     ) -> Option<DeadReckonedPose> {
-        if scan.valid_bins() >= MIN_COMMON_BINS {
+        if scan.valid_bins() >= self.cfg.min_common_bins as usize {
             self.blind_from = None;
             return None;
         }
         let from = *self.blind_from.get_or_insert(*pose);
-        (wrap_rad(pose.heading_rad - from.heading_rad).abs() >= BLIND_TURNED_RAD).then_some(from)
+        (wrap_rad(pose.heading_rad - from.heading_rad).abs() >= self.cfg.blind_turned_rad)
+            .then_some(from)
     }
 
     /// Feeds this frame's scan and dead-reckoned pose. Returns the pose where the picture last
     /// changed when the robot is stalled (the scan the same, dead reckoning moved or turned
     /// past the limits since), or where the scan went blind when dead reckoning turned past
-    /// [`BLIND_TURNED_RAD`] without it showing anything; the check then starts afresh from
+    /// `blind_turned_rad` without it showing anything; the check then starts afresh from
     /// there.
     pub fn update(
         &mut self,
@@ -137,21 +126,22 @@ impl StallCheck {
             &scan.range_m,
             0..SCAN_BINS,
             f32::INFINITY,
-            MIN_COMMON_BINS,
+            self.cfg.min_common_bins as usize,
         );
         let middle = median_change(
             &anchor.range_m,
             &scan.range_m,
             SCAN_BINS / 3..2 * SCAN_BINS / 3,
-            MIDDLE_RANGE_M,
-            MIN_COMMON_MIDDLE_BINS,
+            self.cfg.middle_range_m as f32,
+            self.cfg.min_common_middle_bins as usize,
         );
-        let same = |c: Option<f64>| c.is_some_and(|c| c < SAME_REL);
+        let same_share = self.cfg.same_share;
+        let same = |c: Option<f64>| c.is_some_and(|c| c < same_share);
         match all {
-            Some(change) if change < SAME_REL => {
+            Some(change) if change < same_share => {
                 let moved = (pose.x_m - anchor.pose.x_m).hypot(pose.y_m - anchor.pose.y_m);
                 let turned = wrap_rad(pose.heading_rad - anchor.pose.heading_rad).abs();
-                if (moved >= MOVED_M && same(middle)) || turned >= TURNED_RAD {
+                if (moved >= self.cfg.moved_m && same(middle)) || turned >= self.cfg.turned_rad {
                     self.anchor = Some(Anchor {
                         range_m: scan.range_m,
                         pose: anchor.pose,

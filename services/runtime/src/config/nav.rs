@@ -45,6 +45,14 @@ pub struct GridConfig {
     pub scan_range_m: f64,
     /// Scans taken while turning faster than this are not added, degrees per second.
     pub max_turn_rate_deg_s: f64,
+    /// A ray stops marking free this share of its length before its point (a ray that
+    /// meets a wall at a slant runs beside it for its last stretch and would clear it).
+    pub free_margin_share: f64,
+    /// A scan bin is kept only when a neighbouring bin agrees with it: their depths differ
+    /// by at most this share of the depth ...
+    pub support_share: f64,
+    /// ... plus this, metres.
+    pub support_m: f64,
 }
 
 impl Default for GridConfig {
@@ -59,6 +67,9 @@ impl Default for GridConfig {
             decided_log_odds: 0.8,
             scan_range_m: 2.0,
             max_turn_rate_deg_s: 20.0,
+            free_margin_share: 0.1,
+            support_share: 0.1,
+            support_m: 0.05,
         }
     }
 }
@@ -77,6 +88,9 @@ impl GridConfig {
                 ("decided_log_odds", self.decided_log_odds, 0.01, 10.0),
                 ("scan_range_m", self.scan_range_m, 0.5, 20.0),
                 ("max_turn_rate_deg_s", self.max_turn_rate_deg_s, 0.0, 1000.0),
+                ("free_margin_share", self.free_margin_share, 0.0, 0.9),
+                ("support_share", self.support_share, 0.0, 1.0),
+                ("support_m", self.support_m, 0.0, 1.0),
             ],
         )?;
         if self.extent_m / self.cell_m > 4096.0 {
@@ -137,6 +151,16 @@ pub struct ScanMatchConfig {
     pub position_gain: f64,
     /// Largest position correction per scan, metres.
     pub position_max_step_m: f64,
+    /// Share by which the best pose's score must beat the dead-reckoned pose's.
+    pub min_gain_share: f64,
+    /// Occupied cells within this distance of a point's nearest one draw the wall it lies
+    /// on (position alignment), metres.
+    pub wall_patch_m: f64,
+    /// Residuals beyond this weigh less (Huber; position alignment), metres.
+    pub huber_m: f64,
+    /// A patch is a wall, with a direction, when its spread across is under this share of
+    /// its spread along (the eigenvalues of its cells' covariance).
+    pub max_flatness: f64,
 }
 
 impl Default for ScanMatchConfig {
@@ -155,6 +179,10 @@ impl Default for ScanMatchConfig {
             position_min_points: 8,
             position_gain: 0.3,
             position_max_step_m: 0.02,
+            min_gain_share: 0.15,
+            wall_patch_m: 0.25,
+            huber_m: 0.1,
+            max_flatness: 0.3,
         }
     }
 }
@@ -203,6 +231,10 @@ impl ScanMatchConfig {
                 ),
                 ("position_gain", self.position_gain, 0.0, 1.0),
                 ("position_max_step_m", self.position_max_step_m, 0.0, 0.5),
+                ("min_gain_share", self.min_gain_share, 0.0, 10.0),
+                ("wall_patch_m", self.wall_patch_m, 0.01, 2.0),
+                ("huber_m", self.huber_m, 0.001, 1.0),
+                ("max_flatness", self.max_flatness, 0.0, 1.0),
             ],
         )
     }
@@ -232,6 +264,9 @@ pub struct CostmapConfig {
     /// cell within the footprint's half-diagonal plus `clearance_m`: Nav2's "possibly
     /// inscribed" band), in metres of path per cell: paths keep where turns fit.
     pub turn_clearance_cost_m: f64,
+    /// Extra cost of a cell crossed while leaving a lethal start (the robot stands where
+    /// the costmap says it cannot), in metres of path per cell.
+    pub escape_cost_m: f64,
 }
 
 impl Default for CostmapConfig {
@@ -243,6 +278,7 @@ impl Default for CostmapConfig {
             unknown_cost_m: 0.05,
             unknown_clearance_cost_m: 1.0,
             turn_clearance_cost_m: 1.0,
+            escape_cost_m: 1.0,
         }
     }
 }
@@ -268,6 +304,7 @@ impl CostmapConfig {
                     0.0,
                     100.0,
                 ),
+                ("escape_cost_m", self.escape_cost_m, 0.0, 100.0),
             ],
         )
     }
@@ -300,6 +337,10 @@ pub struct FrontierConfig {
     /// ... but not nearer than this: the camera is blind close up (the matcher's largest
     /// disparity), metres from the turning centre.
     pub min_view_m: f64,
+    /// Extra cost of a frontier whose centre lies in the camera's blind zone, metres.
+    pub blind_cost_m: f64,
+    /// Seconds between retries once no frontier is left (after a look around).
+    pub retry_s: f64,
 }
 
 impl Default for FrontierConfig {
@@ -315,6 +356,8 @@ impl Default for FrontierConfig {
             keep_goal_m: 1.0,
             view_m: 1.5,
             min_view_m: 0.7,
+            blind_cost_m: 2.0,
+            retry_s: 20.0,
         }
     }
 }
@@ -334,6 +377,8 @@ impl FrontierConfig {
                 ("keep_goal_m", self.keep_goal_m, 0.0, 100.0),
                 ("view_m", self.view_m, 0.0, 20.0),
                 ("min_view_m", self.min_view_m, 0.0, 20.0),
+                ("blind_cost_m", self.blind_cost_m, 0.0, 100.0),
+                ("retry_s", self.retry_s, 0.5, 600.0),
             ],
         )
     }
@@ -365,6 +410,20 @@ pub struct ControllerConfig {
     /// Margin beyond the circle the footprint's corners sweep that must hold no occupied
     /// cell before turning in place, metres (it absorbs the map's drift and wall depth).
     pub turn_margin_m: f64,
+    /// Side margin of the rectangle swept ahead or behind beyond the footprint, metres.
+    pub sweep_margin_m: f64,
+    /// Largest share of the swept rectangle ahead that may be unknown for "mostly seen
+    /// free" (0..1).
+    pub max_unknown_ahead_share: f64,
+    /// Shifts (ahead or back) in a row to clear the turning disc before turning anyway: a
+    /// disc blocked both ways would otherwise rock the robot back and forth.
+    pub max_shifts: u32,
+    /// Turning more than this since the middle window last saw the front makes that range
+    /// stale, radians (0.26: 15 degrees).
+    pub front_memory_turn_rad: f64,
+    /// A scan with fewer valid bins than this, and no front range, counts as a wall ahead
+    /// (and the frontiers in the blind zone cost `frontier.blind_cost_m` more).
+    pub blind_scan_bins: u32,
 }
 
 impl Default for ControllerConfig {
@@ -378,6 +437,11 @@ impl Default for ControllerConfig {
             stop_range_m: 0.5,
             turn_ramp: 8,
             turn_margin_m: 0.05,
+            sweep_margin_m: 0.03,
+            max_unknown_ahead_share: 0.25,
+            max_shifts: 6,
+            front_memory_turn_rad: 0.26,
+            blind_scan_bins: 4,
         }
     }
 }
@@ -395,6 +459,26 @@ impl ControllerConfig {
                 ("stop_range_m", self.stop_range_m, 0.0, 5.0),
                 ("turn_ramp", f64::from(self.turn_ramp), 0.0, 63.0),
                 ("turn_margin_m", self.turn_margin_m, 0.0, 0.5),
+                ("sweep_margin_m", self.sweep_margin_m, 0.0, 0.5),
+                (
+                    "max_unknown_ahead_share",
+                    self.max_unknown_ahead_share,
+                    0.0,
+                    1.0,
+                ),
+                ("max_shifts", f64::from(self.max_shifts), 0.0, 100.0),
+                (
+                    "front_memory_turn_rad",
+                    self.front_memory_turn_rad,
+                    0.0,
+                    3.2,
+                ),
+                (
+                    "blind_scan_bins",
+                    f64::from(self.blind_scan_bins),
+                    0.0,
+                    64.0,
+                ),
             ],
         )?;
         if self.aligned_deg >= self.turn_above_deg {
@@ -428,6 +512,30 @@ pub struct RecoveryConfig {
     pub max_per_goal: u32,
     /// Turn in place this far before exploring, to see around the start, degrees (0: no).
     pub start_spin_deg: f64,
+    /// Rotations are cut into steps of at most this much, with a pause after each, so that
+    /// the scans taken while standing enter the map (those taken turning fast do not),
+    /// radians (0.8: 46 degrees).
+    pub rotate_step_rad: f64,
+    /// The pause after each rotation step, seconds.
+    pub rotate_pause_s: f64,
+    /// After a turn in place stalled with the way ahead seen clear, the robot first drives
+    /// this far ahead, metres: a robot turning in place is held by something its rear or
+    /// side sweeps, which the forward camera never saw (measured: a robot 0.22 m from the
+    /// wall behind it in a 0.88 m corridor, whose corners sweep 0.27 m, turned against that
+    /// wall, waited and turned again for 270 s), and moving ahead takes it off.
+    pub turn_stall_shift_m: f64,
+    /// Stalled turns this near each other are at the same place (the second one does not
+    /// shift ahead again), metres.
+    pub turn_stall_place_m: f64,
+    /// A behaviour that has not ended by odometry after this long ends anyway (odometry
+    /// that does not advance, with no actuator reports, must not hold the robot in it), s.
+    pub behaviour_limit_s: f64,
+    /// After a stalled drive, a bump is marked this far beyond the footprint's front or
+    /// back, metres (the footprint clearing leaves occupied cells alone, so it stays).
+    pub bump_gap_m: f64,
+    /// After a stalled turn, a bump is marked this far beside the footprint's side, metres
+    /// (inside the circle the corners sweep: the half-diagonal is 0.11 m beyond the side).
+    pub turn_bump_gap_m: f64,
 }
 
 impl Default for RecoveryConfig {
@@ -440,6 +548,13 @@ impl Default for RecoveryConfig {
             wait_s: 0.5,
             max_per_goal: 1,
             start_spin_deg: 0.0,
+            rotate_step_rad: 0.8,
+            rotate_pause_s: 0.35,
+            turn_stall_shift_m: 0.12,
+            turn_stall_place_m: 0.5,
+            behaviour_limit_s: 5.0,
+            bump_gap_m: 0.12,
+            turn_bump_gap_m: 0.06,
         }
     }
 }
@@ -456,6 +571,81 @@ impl RecoveryConfig {
                 ("wait_s", self.wait_s, 0.0, 60.0),
                 ("max_per_goal", f64::from(self.max_per_goal), 0.0, 100.0),
                 ("start_spin_deg", self.start_spin_deg, 0.0, 720.0),
+                ("rotate_step_rad", self.rotate_step_rad, 0.05, 6.3),
+                ("rotate_pause_s", self.rotate_pause_s, 0.0, 10.0),
+                ("turn_stall_shift_m", self.turn_stall_shift_m, 0.0, 1.0),
+                ("turn_stall_place_m", self.turn_stall_place_m, 0.0, 10.0),
+                ("behaviour_limit_s", self.behaviour_limit_s, 0.5, 600.0),
+                ("bump_gap_m", self.bump_gap_m, 0.0, 1.0),
+                ("turn_bump_gap_m", self.turn_bump_gap_m, 0.0, 1.0),
+            ],
+        )
+    }
+}
+
+/// The stall check (`[nav.stall]`): a robot held by a wall while its wheels turn keeps the
+/// same picture while dead reckoning integrates the commands on.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StallConfig {
+    /// Bins valid in both scans needed to compare them.
+    pub min_common_bins: u32,
+    /// The scan is unchanged when the median relative range change is below this share.
+    pub same_share: f64,
+    /// Dead-reckoned travel since the scan last changed that must change it, metres ...
+    pub moved_m: f64,
+    /// ... or turn, radians (0.35: 20 degrees, about 24 of the 64 bins over a 53 degree
+    /// view).
+    pub turned_rad: f64,
+    /// A turn is a stall when dead reckoning turned this far while the scan stayed too
+    /// empty to compare, radians (1.57: 90 degrees). A turn held by a wall the camera
+    /// faces from nearer than the matcher's shortest range sees nothing the whole time
+    /// (measured on generated maze 4: dead reckoning turned on 170 degrees); a free turn
+    /// brings something into view well before (textured walls: 40 degrees at most).
+    pub blind_turned_rad: f64,
+    /// Bins valid in both scans needed to compare their middle thirds (for a drive).
+    pub min_common_middle_bins: u32,
+    /// Middle bins farther than this are not compared for a drive, metres (`moved_m` is
+    /// then at least a tenth of their range).
+    pub middle_range_m: f64,
+}
+
+impl Default for StallConfig {
+    fn default() -> Self {
+        Self {
+            min_common_bins: 16,
+            same_share: 0.03,
+            moved_m: 0.2,
+            turned_rad: 0.35,
+            blind_turned_rad: 1.57,
+            min_common_middle_bins: 6,
+            middle_range_m: 2.0,
+        }
+    }
+}
+
+impl StallConfig {
+    fn validate(&self) -> Result<(), Invalid> {
+        check_ranges(
+            "stall",
+            &[
+                (
+                    "min_common_bins",
+                    f64::from(self.min_common_bins),
+                    1.0,
+                    64.0,
+                ),
+                ("same_share", self.same_share, 0.0, 1.0),
+                ("moved_m", self.moved_m, 0.01, 5.0),
+                ("turned_rad", self.turned_rad, 0.01, 6.3),
+                ("blind_turned_rad", self.blind_turned_rad, 0.01, 6.3),
+                (
+                    "min_common_middle_bins",
+                    f64::from(self.min_common_middle_bins),
+                    1.0,
+                    64.0,
+                ),
+                ("middle_range_m", self.middle_range_m, 0.1, 20.0),
             ],
         )
     }
@@ -477,6 +667,8 @@ pub struct NavConfig {
     pub controller: ControllerConfig,
     /// Progress checking and recovery.
     pub recovery: RecoveryConfig,
+    /// The stall check.
+    pub stall: StallConfig,
 }
 
 impl NavConfig {
@@ -489,6 +681,7 @@ impl NavConfig {
         self.frontier.validate()?;
         self.controller.validate()?;
         self.recovery.validate()?;
+        self.stall.validate()?;
         let f = &self.frontier;
         if f.min_view_m > f.view_m {
             return Err(Invalid::new(
@@ -538,10 +731,38 @@ mod tests {
             Err("scan_match.search_m".into())
         );
         let mut c = NavConfig::default();
+        c.stall.same_share = 1.5;
+        assert_eq!(
+            c.validate().map_err(|e| e.key),
+            Err("stall.same_share".into())
+        );
+        let mut c = NavConfig::default();
+        c.recovery.rotate_step_rad = 0.0;
+        assert_eq!(
+            c.validate().map_err(|e| e.key),
+            Err("recovery.rotate_step_rad".into())
+        );
+        let mut c = NavConfig::default();
         c.frontier.view_m = 2.5;
         assert_eq!(
             c.validate().map_err(|e| e.key),
             Err("frontier.view_m".into())
         );
+    }
+
+    #[test]
+    fn every_number_of_a_layer_is_read_from_its_table() {
+        let c: NavConfig = toml::from_str(
+            "[stall]\nmoved_m = 0.3\n[recovery]\nturn_stall_shift_m = 0.2\n\
+             [controller]\nmax_shifts = 2\n[grid]\nsupport_m = 0.1",
+        )
+        .expect("parses");
+        assert_eq!(c.stall.moved_m, 0.3);
+        assert_eq!(c.stall.turned_rad, StallConfig::default().turned_rad);
+        assert_eq!(c.recovery.turn_stall_shift_m, 0.2);
+        assert_eq!(c.controller.max_shifts, 2);
+        assert_eq!(c.grid.support_m, 0.1);
+        assert_eq!(c.validate(), Ok(()));
+        assert!(toml::from_str::<NavConfig>("[stall]\nmoved = 0.3").is_err());
     }
 }
