@@ -5,7 +5,10 @@
 //! the command latency), otherwise it drives ahead. Every motion is checked against the
 //! occupancy grid with the robot's footprint first: ahead, the swept rectangle; turning, the
 //! circle its corners sweep, checked again every frame of the turn (the camera sees new
-//! ground as the robot turns).
+//! ground as the robot turns). A robot boxed in (no room to turn, shifting did not make
+//! room) with the path behind it backs out along the way it came while that is held free.
+
+use std::f64::consts::FRAC_PI_2;
 
 use hvs_runtime::config::{ControllerConfig, PulsePair, PulseTable, RobotConfig};
 use hvs_shared::messages::MotionCommand;
@@ -349,6 +352,17 @@ impl Controller {
                 }
                 // Boxed in: turn anyway, the shortest way.
             }
+            if blocked.is_some()
+                && error.abs() > FRAC_PI_2
+                && self
+                    .footprint
+                    .behind_clear(grid, &pose, self.cfg.lookahead_m)
+            {
+                // Boxed in with the path behind (a hallway narrower than the turning disc,
+                // a dead end): back out along the way the robot came, which the grid holds
+                // free, until there is room to turn.
+                return out(MotionCommand::Reverse, false);
+            }
             self.shifts = 0;
             self.mode = Mode::Turn {
                 left,
@@ -550,6 +564,40 @@ mod tests {
         );
         assert_eq!(
             boxed.step(&grid, input(half, &left)).command,
+            MotionCommand::Left
+        );
+    }
+
+    #[test]
+    fn boxed_in_with_the_path_behind_it_backs_out_instead_of_turning() {
+        let mut grid = open_grid();
+        let pose = DeadReckonedPose::default();
+        // A hallway narrower than the turning disc: walls 0.35 m either side, from 0.5 m
+        // behind to 0.5 m ahead; the path goes back the way the robot came.
+        grid.mark_bump(&pose, (-0.5, 0.5), (0.35, 0.35));
+        grid.mark_bump(&pose, (-0.5, 0.5), (-0.35, -0.35));
+        let back = [(0.0, 0.0), (-1.0, 0.0), (-2.0, 0.0)];
+        let mut c = default_controller();
+        c.shifts = c.cfg.max_shifts;
+        assert_eq!(
+            c.step(&grid, input(pose, &back)).command,
+            MotionCommand::Reverse
+        );
+        // A wall behind too: it turns anyway, as before.
+        grid.mark_bump(&pose, (-0.3, -0.3), (-0.2, 0.2));
+        assert!(matches!(
+            c.step(&grid, input(pose, &back)).command,
+            MotionCommand::Left | MotionCommand::Right
+        ));
+        // The path to the side (not behind): no backing out.
+        let mut grid = open_grid();
+        grid.mark_bump(&pose, (-0.5, 0.5), (0.35, 0.35));
+        grid.mark_bump(&pose, (-0.5, 0.5), (-0.35, -0.35));
+        let mut c = default_controller();
+        c.shifts = c.cfg.max_shifts;
+        let side = [(0.0, 0.0), (0.3, 1.0)];
+        assert_eq!(
+            c.step(&grid, input(pose, &side)).command,
             MotionCommand::Left
         );
     }
