@@ -342,15 +342,21 @@ impl Controller {
                 && self.shifts < self.cfg.max_shifts
             {
                 // Something in the turning disc: move away from it first.
-                if ahead && self.footprint.behind_clear(grid, &pose, 0.1) {
+                if ahead
+                    && self
+                        .footprint
+                        .behind_clear(grid, &pose, self.cfg.shift_check_m)
+                {
                     self.shifts += 1;
                     return out(MotionCommand::Reverse, false);
                 }
-                if !ahead && self.may_drive_ahead(grid, &pose, 0.1, input.front_m) {
+                if !ahead
+                    && self.may_drive_ahead(grid, &pose, self.cfg.shift_check_m, input.front_m)
+                {
                     self.shifts += 1;
                     return out(MotionCommand::Forward, false);
                 }
-                // Boxed in: turn anyway, the shortest way.
+                // Boxed in: back out (below), or turn anyway, the shortest way.
             }
             if blocked.is_some()
                 && error.abs() > FRAC_PI_2

@@ -265,7 +265,7 @@ impl OccupancyGrid {
         for cell in touched {
             // A wall fades slowly: a few stray rays do not open it.
             let delta = if f64::from(self.log_odds(cell)) > self.cfg.decided_log_odds {
-                0.25 * miss
+                self.cfg.occupied_miss_share * miss
             } else {
                 miss
             };

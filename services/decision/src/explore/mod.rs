@@ -535,7 +535,11 @@ impl Explorer {
             now_ns: input.now_ns,
             distance_m: input.distance_m,
             heading_rad: input.pose.heading_rad,
-            behind_clear: fp.behind_clear(&self.grid, &input.pose, 0.05),
+            behind_clear: fp.behind_clear(
+                &self.grid,
+                &input.pose,
+                self.cfg.recovery.backup_check_m,
+            ),
             ahead_clear: fp.ahead_clear(
                 &self.grid,
                 &input.pose,
@@ -588,7 +592,7 @@ impl Explorer {
             let turn = wrap_rad((p.1 - pose.y_m).atan2(p.0 - pose.x_m) - pose.heading_rad);
             let g = centre(f.goal);
             // The goal being driven to is ranked cheaper (hysteresis).
-            let kept = previous.is_some_and(|q| (q.0 - g.0).hypot(q.1 - g.1) < 0.6);
+            let kept = previous.is_some_and(|q| (q.0 - g.0).hypot(q.1 - g.1) < fcfg.same_goal_m);
             // A frontier in the blind zone cannot be seen from here: drive away and back.
             let blind = (p.0 - pose.x_m).hypot(p.1 - pose.y_m) < fcfg.min_view_m;
             fcfg.turn_weight * turn.abs() - if kept { keep } else { 0.0 }
@@ -624,7 +628,8 @@ impl Explorer {
         };
         self.status.done = false;
         let goal_m = centre(f.goal);
-        let new_goal = previous.is_none_or(|g| (g.0 - goal_m.0).hypot(g.1 - goal_m.1) > 0.6);
+        let new_goal = previous
+            .is_none_or(|g| (g.0 - goal_m.0).hypot(g.1 - goal_m.1) > self.cfg.frontier.same_goal_m);
         if new_goal {
             self.recoveries_for_goal = 0;
         }

@@ -53,6 +53,9 @@ pub struct GridConfig {
     pub support_share: f64,
     /// ... plus this, metres.
     pub support_m: f64,
+    /// A ray crossing an occupied cell lowers it by this share of `miss_log_odds` only (a
+    /// wall fades slowly: a few stray rays do not open it).
+    pub occupied_miss_share: f64,
 }
 
 impl Default for GridConfig {
@@ -70,6 +73,7 @@ impl Default for GridConfig {
             free_margin_share: 0.1,
             support_share: 0.1,
             support_m: 0.05,
+            occupied_miss_share: 0.25,
         }
     }
 }
@@ -91,6 +95,7 @@ impl GridConfig {
                 ("free_margin_share", self.free_margin_share, 0.0, 0.9),
                 ("support_share", self.support_share, 0.0, 1.0),
                 ("support_m", self.support_m, 0.0, 1.0),
+                ("occupied_miss_share", self.occupied_miss_share, 0.0, 1.0),
             ],
         )?;
         if self.extent_m / self.cell_m > 4096.0 {
@@ -341,6 +346,9 @@ pub struct FrontierConfig {
     pub blind_cost_m: f64,
     /// Seconds between retries once no frontier is left (after a look around).
     pub retry_s: f64,
+    /// A goal within this of the previous one is the same goal (ranked `keep_goal_m`
+    /// cheaper, its recovery count kept), metres.
+    pub same_goal_m: f64,
 }
 
 impl Default for FrontierConfig {
@@ -358,6 +366,7 @@ impl Default for FrontierConfig {
             min_view_m: 0.7,
             blind_cost_m: 2.0,
             retry_s: 20.0,
+            same_goal_m: 0.6,
         }
     }
 }
@@ -379,6 +388,7 @@ impl FrontierConfig {
                 ("min_view_m", self.min_view_m, 0.0, 20.0),
                 ("blind_cost_m", self.blind_cost_m, 0.0, 100.0),
                 ("retry_s", self.retry_s, 0.5, 600.0),
+                ("same_goal_m", self.same_goal_m, 0.0, 10.0),
             ],
         )
     }
@@ -418,6 +428,8 @@ pub struct ControllerConfig {
     /// Shifts (ahead or back) in a row to clear the turning disc before turning anyway: a
     /// disc blocked both ways would otherwise rock the robot back and forth.
     pub max_shifts: u32,
+    /// A shift needs this much of the way ahead or behind clear, metres.
+    pub shift_check_m: f64,
     /// Turning more than this since the middle window last saw the front makes that range
     /// stale, radians (0.26: 15 degrees).
     pub front_memory_turn_rad: f64,
@@ -440,6 +452,7 @@ impl Default for ControllerConfig {
             sweep_margin_m: 0.03,
             max_unknown_ahead_share: 0.25,
             max_shifts: 6,
+            shift_check_m: 0.1,
             front_memory_turn_rad: 0.26,
             blind_scan_bins: 4,
         }
@@ -467,6 +480,7 @@ impl ControllerConfig {
                     1.0,
                 ),
                 ("max_shifts", f64::from(self.max_shifts), 0.0, 100.0),
+                ("shift_check_m", self.shift_check_m, 0.0, 1.0),
                 (
                     "front_memory_turn_rad",
                     self.front_memory_turn_rad,
@@ -504,6 +518,9 @@ pub struct RecoveryConfig {
     pub progress_timeout_s: f64,
     /// Back-up distance, metres.
     pub backup_m: f64,
+    /// Backing up needs this much of the way behind held free, checked every frame of it,
+    /// metres.
+    pub backup_check_m: f64,
     /// Rotation in place after backing up, degrees.
     pub rotate_deg: f64,
     /// Standing still after rotating, seconds.
@@ -544,6 +561,7 @@ impl Default for RecoveryConfig {
             progress_m: 0.15,
             progress_timeout_s: 6.0,
             backup_m: 0.15,
+            backup_check_m: 0.05,
             rotate_deg: 90.0,
             wait_s: 0.5,
             max_per_goal: 1,
@@ -567,6 +585,7 @@ impl RecoveryConfig {
                 ("progress_m", self.progress_m, 0.01, 5.0),
                 ("progress_timeout_s", self.progress_timeout_s, 0.5, 600.0),
                 ("backup_m", self.backup_m, 0.0, 2.0),
+                ("backup_check_m", self.backup_check_m, 0.0, 2.0),
                 ("rotate_deg", self.rotate_deg, 0.0, 360.0),
                 ("wait_s", self.wait_s, 0.0, 60.0),
                 ("max_per_goal", f64::from(self.max_per_goal), 0.0, 100.0),
