@@ -145,13 +145,18 @@ impl FootprintCheck {
         pose: &DeadReckonedPose,
         ahead_m: f64,
     ) -> SweptArea {
-        let w = self.half_width_m + self.sweep_margin_m;
-        SweptArea::of(self.rect_count(
+        self.swept(
             grid,
             pose,
             (self.half_length_m, self.half_length_m + ahead_m),
-            (-w, w),
-        ))
+        )
+    }
+
+    /// The footprint's width (plus `sweep_margin_m` a side) swept over `ahead` (robot
+    /// frame, metres).
+    fn swept(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, ahead: (f64, f64)) -> SweptArea {
+        let w = self.half_width_m + self.sweep_margin_m;
+        SweptArea::of(self.rect_count(grid, pose, ahead, (-w, w)))
     }
 
     /// Whether driving `ahead_m` forward sweeps no occupied cell and mostly cells seen free.
@@ -163,13 +168,11 @@ impl FootprintCheck {
     /// camera never sees behind: what is known there is the way the robot came, which the
     /// grid clears under its footprint, and walls seen before the robot turned).
     pub fn behind_clear(&self, grid: &OccupancyGrid, pose: &DeadReckonedPose, back_m: f64) -> bool {
-        let w = self.half_width_m + self.sweep_margin_m;
-        self.seen_clear(&SweptArea::of(self.rect_count(
+        self.seen_clear(&self.swept(
             grid,
             pose,
             (-self.half_length_m - back_m, -self.half_length_m),
-            (-w, w),
-        )))
+        ))
     }
 
     /// Whether the disc the footprint sweeps turning (`left` or right) holds an occupied

@@ -596,11 +596,7 @@ impl Explorer {
             // A frontier in the blind zone cannot be seen from here: drive away and back.
             let blind = (p.0 - pose.x_m).hypot(p.1 - pose.y_m) < fcfg.min_view_m;
             fcfg.turn_weight * turn.abs() - if kept { keep } else { 0.0 }
-                + if blind {
-                    self.cfg.frontier.blind_cost_m
-                } else {
-                    0.0
-                }
+                + if blind { fcfg.blind_cost_m } else { 0.0 }
         };
         let chosen = choose(&frontiers, &fcfg, map.cell_m(), &self.blacklist, extra_cost).cloned();
         let Some(f) = chosen else {
@@ -628,8 +624,8 @@ impl Explorer {
         };
         self.status.done = false;
         let goal_m = centre(f.goal);
-        let new_goal = previous
-            .is_none_or(|g| (g.0 - goal_m.0).hypot(g.1 - goal_m.1) > self.cfg.frontier.same_goal_m);
+        let new_goal =
+            previous.is_none_or(|g| (g.0 - goal_m.0).hypot(g.1 - goal_m.1) > fcfg.same_goal_m);
         if new_goal {
             self.recoveries_for_goal = 0;
         }
