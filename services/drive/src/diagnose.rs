@@ -32,11 +32,51 @@ pub fn trace(scene: &Scene<'_>, t_s: f64, each_second: bool, collided: bool) {
     if each_second {
         let (mean_m, n, unseen) = consistency(scene, 1.0);
         eprintln!("consistency {t_s:6.2} {mean_m:.3} {n} {unseen}");
+        let [occupied, free, unknown] = wall_surface_states(scene, HAZARD_RADIUS_M);
+        eprintln!("hazard {t_s:6.2} {occupied} {free} {unknown}");
     }
     if collided {
         eprintln!("collision {t_s:6.2} {}", collision_line(scene));
         eprintln!("{}", picture(scene, 1.0));
     }
+}
+
+/// Radius around the robot within which the wall surface is looked up for the `hazard`
+/// line, metres: the turning disc (0.27 m) with room for the margins.
+const HAZARD_RADIUS_M: f64 = 0.4;
+
+/// The true walls' surface (wall points with floor within 5 cm) within `radius_m` of the
+/// robot, carried into the believed frame through the robot's body, counted by the grid's
+/// state there: [occupied, free, unknown]. A free count is a wall the footprint checks take
+/// for floor (a wall never mapped, carved by rays past its edge, or drawn aside by drift).
+fn wall_surface_states(scene: &Scene<'_>, radius_m: f64) -> [usize; 3] {
+    let (map, truth, believed, grid) = (scene.map, scene.truth, scene.believed, scene.grid);
+    let step = 0.05;
+    let k = (radius_m / step).ceil() as i32;
+    let mut counts = [0; 3];
+    for i in -k..=k {
+        for j in -k..=k {
+            let (a, l) = (f64::from(i) * step, f64::from(j) * step);
+            if a.hypot(l) > radius_m {
+                continue;
+            }
+            let at = |da: f64, dl: f64| {
+                let p = truth.offset(a + da, l + dl);
+                map.is_wall_at(p.x_m, p.y_m)
+            };
+            if !at(0.0, 0.0) || (at(step, 0.0) && at(-step, 0.0) && at(0.0, step) && at(0.0, -step))
+            {
+                continue;
+            }
+            let (x, y) = to_grid_frame(believed, (a, l));
+            counts[match grid.state_at(x, y) {
+                CellState::Occupied => 0,
+                CellState::Free => 1,
+                CellState::Unknown => 2,
+            }] += 1;
+        }
+    }
+    counts
 }
 
 /// Margin around the footprint searched for the touching wall, metres.
@@ -188,4 +228,46 @@ fn picture(scene: &Scene<'_>, half_m: f64) -> String {
         out.push('\n');
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hvs_runtime::config::GridConfig;
+
+    #[test]
+    fn the_wall_surface_near_the_robot_is_counted_by_the_grids_state() {
+        // A hallway 0.5 m cells, the robot in its middle facing east: walls 0.25 m to
+        // either side of it.
+        let map =
+            GridMap::parse("@cell_m 0.5\n#####\n#.>.#\n#####\n", "test").expect("a valid map");
+        let truth = map.start_pose();
+        let believed = DeadReckonedPose::default();
+        let robot = RobotConfig::default();
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        let scene = |grid: &OccupancyGrid| {
+            wall_surface_states(
+                &Scene {
+                    map: &map,
+                    truth: &truth,
+                    believed: &believed,
+                    grid,
+                    robot: &robot,
+                },
+                HAZARD_RADIUS_M,
+            )
+        };
+        // Nothing mapped: all of the surface is unknown.
+        let [occupied, free, unknown] = scene(&grid);
+        assert_eq!((occupied, free), (0, 0));
+        assert!(unknown > 10, "{unknown}");
+        // The wall's cells marked: its surface reads occupied.
+        let mut marked = grid.clone();
+        marked.mark_bump(&believed, (-0.4, 0.4), (-0.25, 0.25));
+        assert_eq!(scene(&marked), [unknown, 0, 0]);
+        // Cleared instead (as rays past a wall's edge clear it): free, where the footprint
+        // checks take it for floor.
+        grid.clear_footprint(&believed, 0.4, 0.35);
+        assert_eq!(scene(&grid), [0, unknown, 0]);
+    }
 }

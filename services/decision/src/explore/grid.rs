@@ -213,23 +213,50 @@ impl OccupancyGrid {
         scan: &ObstacleScan,
     ) -> ScanPoints {
         let camera = to_grid_frame(pose, (camera_forward_m, 0.0));
+        let bins = self.trusted_bins(scan, camera_forward_m);
         let mut hits = Vec::with_capacity(SCAN_BINS);
         let mut rays = Vec::with_capacity(SCAN_BINS);
-        for ((ahead, left), dist) in self.trusted_bins(scan, camera_forward_m) {
+        for &((ahead, left), dist) in &bins {
             let g = to_grid_frame(pose, (ahead, left));
             let d = (g.0 - camera.0).hypot(g.1 - camera.1).max(1e-9);
             let dir = ((g.0 - camera.0) / d, (g.1 - camera.1) / d);
-            if dist <= self.cfg.scan_range_m {
+            let mut free_m = if dist <= self.cfg.scan_range_m {
                 hits.push(g);
-                rays.push((
-                    dir,
-                    (dist * (1.0 - self.cfg.free_margin_share)).min(dist - self.cfg.cell_m),
-                ));
+                (dist * (1.0 - self.cfg.free_margin_share)).min(dist - self.cfg.cell_m)
             } else {
-                rays.push((dir, self.cfg.scan_range_m));
+                self.cfg.scan_range_m
+            };
+            if self.cfg.ray_clearance_m > 0.0 {
+                free_m = free_m.min(self.short_of_nearer_hits(
+                    ((ahead - camera_forward_m) / dist, left / dist),
+                    camera_forward_m,
+                    &bins,
+                ));
             }
+            rays.push((dir, free_m));
         }
         ScanPoints { camera, hits, rays }
+    }
+
+    /// How far a ray (unit direction `u`, robot frame, from the camera) may mark free space
+    /// before it passes within `ray_clearance_m` of another bin's nearer point: a ray
+    /// that looks just past a wall's end would otherwise clear the cells of its corner.
+    fn short_of_nearer_hits(
+        &self,
+        u: (f64, f64),
+        camera_forward_m: f64,
+        bins: &[((f64, f64), f64)],
+    ) -> f64 {
+        let clearance = self.cfg.ray_clearance_m;
+        bins.iter()
+            .filter(|&&(_, dist)| dist <= self.cfg.scan_range_m)
+            .filter_map(|&((ahead, left), _)| {
+                let (x, y) = (ahead - camera_forward_m, left);
+                let along = x * u.0 + y * u.1;
+                let across = (x * u.1 - y * u.0).abs();
+                (along > 0.0 && across < clearance).then_some((along - clearance).max(0.0))
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Adds one scan's points and rays.
@@ -368,6 +395,36 @@ mod tests {
             *r = depth_m;
         }
         scan
+    }
+
+    #[test]
+    fn a_ray_past_a_walls_end_stops_short_of_its_corner_with_ray_clearance() {
+        // The left half of the view a wall end 1 m ahead, the right half a wall 1.9 m
+        // ahead: the right half's first rays pass the end's corner within a centimetre.
+        let mut scan = wall_scan(1.9);
+        for r in scan.range_m.iter_mut().take(SCAN_BINS / 2) {
+            *r = 1.0;
+        }
+        let scanned = |ray_clearance_m: f64| {
+            let mut grid = OccupancyGrid::new(GridConfig {
+                ray_clearance_m,
+                ..GridConfig::default()
+            });
+            for _ in 0..3 {
+                let pts = grid.scan_points(&DeadReckonedPose::default(), 0.0, &scan);
+                grid.insert(&pts);
+            }
+            grid
+        };
+        // Without: the cell behind the end's face, beside its corner, is cleared.
+        let open = scanned(0.0);
+        assert_eq!(open.state_at(1.05, -0.03), CellState::Free);
+        // With: it stays unknown, and rays far from the end clear as before.
+        let kept = scanned(0.1);
+        assert_eq!(kept.state_at(1.05, -0.03), CellState::Unknown);
+        assert_eq!(kept.state_at(1.05, 0.03), CellState::Occupied);
+        assert_eq!(kept.state_at(1.2, -0.4), CellState::Free);
+        assert_eq!(kept.state_at(0.5, 0.1), CellState::Free);
     }
 
     #[test]

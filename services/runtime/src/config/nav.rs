@@ -48,6 +48,10 @@ pub struct GridConfig {
     /// A ray stops marking free this share of its length before its point (a ray that
     /// meets a wall at a slant runs beside it for its last stretch and would clear it).
     pub free_margin_share: f64,
+    /// A ray stops marking free this far before it passes within this distance of a
+    /// nearer point of the same scan, metres (0: off): a ray that looks just past a
+    /// wall's end would clear the cells of its corner.
+    pub ray_clearance_m: f64,
     /// A scan bin is kept only when a neighbouring bin agrees with it: their depths differ
     /// by at most this share of the depth ...
     pub support_share: f64,
@@ -71,6 +75,7 @@ impl Default for GridConfig {
             scan_range_m: 2.0,
             max_turn_rate_deg_s: 20.0,
             free_margin_share: 0.1,
+            ray_clearance_m: 0.0,
             support_share: 0.1,
             support_m: 0.05,
             occupied_miss_share: 0.25,
@@ -93,6 +98,7 @@ impl GridConfig {
                 ("scan_range_m", self.scan_range_m, 0.5, 20.0),
                 ("max_turn_rate_deg_s", self.max_turn_rate_deg_s, 0.0, 1000.0),
                 ("free_margin_share", self.free_margin_share, 0.0, 0.9),
+                ("ray_clearance_m", self.ray_clearance_m, 0.0, 1.0),
                 ("support_share", self.support_share, 0.0, 1.0),
                 ("support_m", self.support_m, 0.0, 1.0),
                 ("occupied_miss_share", self.occupied_miss_share, 0.0, 1.0),
