@@ -27,7 +27,9 @@ pub struct Scene<'a> {
 
 /// Prints to stderr, at simulated second `t_s`: with `each_second`, a `consistency` line
 /// (mean distance from the true walls within 1 m to the grid's occupied cells, faces
-/// counted, faces with none near); with `collided`, a `collision` line and a picture.
+/// counted, faces with none near) and a `hazard` line (the true wall surface within
+/// `HAZARD_RADIUS_M` counted by the grid's state: occupied, free, unknown); with `collided`,
+/// a `collision` line and a picture.
 pub fn trace(scene: &Scene<'_>, t_s: f64, each_second: bool, collided: bool) {
     if each_second {
         let (mean_m, n, unseen) = consistency(scene, 1.0);
