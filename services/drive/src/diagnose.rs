@@ -28,14 +28,15 @@ pub struct Scene<'a> {
 /// Prints to stderr, at simulated second `t_s`: with `each_second`, a `consistency` line
 /// (mean distance from the true walls within 1 m to the grid's occupied cells, faces
 /// counted, faces with none near) and a `hazard` line (the true wall surface within
-/// `HAZARD_RADIUS_M` counted by the grid's state: occupied, free, unknown); with `collided`,
+/// `HAZARD_RADIUS_M` counted by the grid's state: occupied, free, unknown, and of the free
+/// and unknown those whose cell ever had a scan point); with `collided`,
 /// a `collision` line and a picture.
 pub fn trace(scene: &Scene<'_>, t_s: f64, each_second: bool, collided: bool) {
     if each_second {
         let (mean_m, n, unseen) = consistency(scene, 1.0);
         eprintln!("consistency {t_s:6.2} {mean_m:.3} {n} {unseen}");
-        let [occupied, free, unknown] = wall_surface_states(scene, HAZARD_RADIUS_M);
-        eprintln!("hazard {t_s:6.2} {occupied} {free} {unknown}");
+        let [occupied, free, unknown, seen] = wall_surface_states(scene, HAZARD_RADIUS_M);
+        eprintln!("hazard {t_s:6.2} {occupied} {free} {unknown} {seen}");
     }
     if collided {
         eprintln!("collision {t_s:6.2} {}", collision_line(scene));
@@ -49,13 +50,14 @@ const HAZARD_RADIUS_M: f64 = 0.4;
 
 /// The true walls' surface (wall points with floor within 5 cm) within `radius_m` of the
 /// robot, carried into the believed frame through the robot's body, counted by the grid's
-/// state there: [occupied, free, unknown]. A free count is a wall the footprint checks take
+/// state there: [occupied, free, unknown, seen] (the last: of the free and unknown, those
+/// whose cell ever had a scan point, [`OccupancyGrid::hits_at`]). A free count is a wall the footprint checks take
 /// for floor (a wall never mapped, carved by rays past its edge, or drawn aside by drift).
-fn wall_surface_states(scene: &Scene<'_>, radius_m: f64) -> [usize; 3] {
+fn wall_surface_states(scene: &Scene<'_>, radius_m: f64) -> [usize; 4] {
     let (map, truth, believed, grid) = (scene.map, scene.truth, scene.believed, scene.grid);
     let step = 0.05;
     let k = (radius_m / step).ceil() as i32;
-    let mut counts = [0; 3];
+    let mut counts = [0; 4];
     for i in -k..=k {
         for j in -k..=k {
             let (a, l) = (f64::from(i) * step, f64::from(j) * step);
@@ -71,11 +73,15 @@ fn wall_surface_states(scene: &Scene<'_>, radius_m: f64) -> [usize; 3] {
                 continue;
             }
             let (x, y) = to_grid_frame(believed, (a, l));
-            counts[match grid.state_at(x, y) {
+            let state = grid.state_at(x, y);
+            counts[match state {
                 CellState::Occupied => 0,
                 CellState::Free => 1,
                 CellState::Unknown => 2,
             }] += 1;
+            if state != CellState::Occupied && grid.hits_at(x, y) > 0 {
+                counts[3] += 1;
+            }
         }
     }
     counts
@@ -118,7 +124,8 @@ fn collision_line(scene: &Scene<'_>) -> String {
                 CellState::Unknown => "unk",
             };
             let near = nearest_occupied_m(grid, x, y).unwrap_or(f64::INFINITY);
-            parts.push(format!("({a:+.2},{l:+.2}) {st} near {near:.2}"));
+            let hits = grid.hits_at(x, y);
+            parts.push(format!("({a:+.2},{l:+.2}) {st} h{hits} near {near:.2}"));
         }
     }
     parts.join("; ")
@@ -235,6 +242,7 @@ fn picture(scene: &Scene<'_>, half_m: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hvs_decision::explore::grid::ScanPoints;
     use hvs_runtime::config::GridConfig;
 
     #[test]
@@ -260,16 +268,32 @@ mod tests {
             )
         };
         // Nothing mapped: all of the surface is unknown.
-        let [occupied, free, unknown] = scene(&grid);
+        let [occupied, free, unknown, seen] = scene(&grid);
+        assert_eq!(seen, 0);
         assert_eq!((occupied, free), (0, 0));
         assert!(unknown > 10, "{unknown}");
         // The wall's cells marked: its surface reads occupied.
         let mut marked = grid.clone();
         marked.mark_bump(&believed, (-0.4, 0.4), (-0.25, 0.25));
-        assert_eq!(scene(&marked), [unknown, 0, 0]);
+        assert_eq!(scene(&marked), [unknown, 0, 0, 0]);
         // Cleared instead (as rays past a wall's edge clear it): free, where the footprint
         // checks take it for floor.
         grid.clear_footprint(&believed, 0.4, 0.35);
-        assert_eq!(scene(&grid), [0, unknown, 0]);
+        assert_eq!(scene(&grid), [0, unknown, 0, 0]);
+        // Seen once (not yet occupied) before the rays cleared it: counted as seen.
+        let mut seen_once = OccupancyGrid::new(GridConfig::default());
+        let hits = (-8..=8)
+            .flat_map(|i| [(f64::from(i) * 0.05, 0.27), (f64::from(i) * 0.05, -0.27)])
+            .collect();
+        seen_once.insert(&ScanPoints {
+            camera: (0.0, 0.0),
+            hits,
+            rays: vec![],
+        });
+        seen_once.clear_footprint(&believed, 0.4, 0.35);
+        let [occupied, free, unknown_now, seen] = scene(&seen_once);
+        assert_eq!((occupied, unknown_now), (0, 0));
+        assert_eq!(free, unknown);
+        assert!(seen > free / 2, "{seen} of {free}");
     }
 }

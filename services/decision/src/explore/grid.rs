@@ -61,6 +61,8 @@ pub struct OccupancyGrid {
     cfg: GridConfig,
     side: usize,
     log_odds: Vec<f32>,
+    /// Scan points ever added per cell (saturating), for traces.
+    hits: Vec<u16>,
     /// Cells ever updated (for bounding searches): min and max column and row.
     bounds: Option<(usize, usize, usize, usize)>,
     /// Scan bins below this one are not used (see [`OccupancyGrid::set_first_bin`]).
@@ -75,6 +77,7 @@ impl OccupancyGrid {
             cfg,
             side,
             log_odds: vec![0.0; side * side],
+            hits: vec![0; side * side],
             bounds: None,
             first_bin: 0,
         }
@@ -138,6 +141,13 @@ impl OccupancyGrid {
         } else {
             CellState::Unknown
         }
+    }
+
+    /// Scan points ever added to the cell holding a point (outside the grid: 0), whatever
+    /// rays made of the cell since: for traces (was a wall the robot touched ever seen?).
+    pub fn hits_at(&self, x_m: f64, y_m: f64) -> u16 {
+        self.cell_of(x_m, y_m)
+            .map_or(0, |(c, r)| self.hits[r * self.side + c])
     }
 
     /// The state of the cell holding a point (outside the grid: unknown).
@@ -303,6 +313,8 @@ impl OccupancyGrid {
         hit_cells.dedup();
         for cell in hit_cells {
             self.update(cell, self.cfg.hit_log_odds);
+            let i = cell.1 * self.side + cell.0;
+            self.hits[i] = self.hits[i].saturating_add(1);
         }
     }
 
@@ -488,5 +500,31 @@ mod tests {
         assert_eq!(grid.state_at(0.05, 0.0), CellState::Occupied);
         assert_eq!(grid.state_at(0.05, 0.5), CellState::Occupied);
         assert_eq!(grid.state_at(0.4, 0.0), CellState::Unknown);
+    }
+
+    #[test]
+    fn a_cell_cleared_by_rays_keeps_its_count_of_scan_points() {
+        // A wall point seen three times, then rays through its cell from the side (a
+        // grazing look past it) until the grid holds it free.
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        let wall = (0.55, 0.05);
+        for _ in 0..3 {
+            grid.insert(&ScanPoints {
+                camera: (-1.0, 0.05),
+                hits: vec![wall],
+                rays: vec![],
+            });
+        }
+        assert_eq!(grid.state_at(wall.0, wall.1), CellState::Occupied);
+        for _ in 0..40 {
+            grid.insert(&ScanPoints {
+                camera: (0.55, -1.0),
+                hits: vec![],
+                rays: vec![((0.0, 1.0), 2.0)],
+            });
+        }
+        assert_eq!(grid.state_at(wall.0, wall.1), CellState::Free);
+        assert_eq!(grid.hits_at(wall.0, wall.1), 3);
+        assert_eq!(grid.hits_at(wall.0, -0.5), 0);
     }
 }
