@@ -28,7 +28,7 @@ pub mod recovery;
 pub mod scan_match;
 pub mod stall;
 
-use hvs_runtime::config::{NavConfig, PulseTable, RobotConfig};
+use hvs_runtime::config::{CostmapConfig, NavConfig, PulseTable, RobotConfig};
 use hvs_shared::messages::{IntersectionType, MotionCommand, ObstacleScan, SCAN_BINS};
 
 use crate::local_map::CellState;
@@ -51,6 +51,17 @@ struct Plan {
     path: Vec<(f64, f64)>,
 }
 
+/// A chosen frontier, its goal cell's centre and the path there (grid frame, metres).
+type Chosen = (frontier::Frontier, (f64, f64), Vec<(f64, f64)>);
+
+/// What one frontier search found.
+struct Search {
+    /// Frontier clusters found.
+    frontiers: usize,
+    /// The chosen frontier, its goal cell's centre and the path there (grid frame, metres).
+    chosen: Option<Chosen>,
+}
+
 /// Counters for the status line and the tests.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ExploreStatus {
@@ -68,6 +79,8 @@ pub struct ExploreStatus {
     pub position_fixes: u64,
     /// Stalls found (the picture unchanged while dead reckoning moved).
     pub stalls: u64,
+    /// Plans that found a frontier only with `[nav.costmap] fallback_clearance_m`.
+    pub tight_plans: u64,
     /// No reachable frontier is left.
     pub done: bool,
 }
@@ -150,6 +163,12 @@ pub struct Explorer {
     plan: Option<Plan>,
     last_plan_ns: Option<u64>,
     replan_now: bool,
+    /// The last search found no frontier with the usual clearance: the next one (next
+    /// frame, one search a frame) keeps only `[nav.costmap] fallback_clearance_m`.
+    search_tight: bool,
+    /// Since when searches with the usual clearance have found no frontier (`None`: the
+    /// last one found one).
+    closed_since_ns: Option<u64>,
     progress: ProgressChecker,
     recovery: Option<Recovery>,
     recoveries_for_goal: u32,
@@ -189,6 +208,8 @@ impl Explorer {
             plan: None,
             last_plan_ns: None,
             replan_now: true,
+            search_tight: false,
+            closed_since_ns: None,
             progress: ProgressChecker::default(),
             recovery: None,
             recoveries_for_goal: 0,
@@ -550,41 +571,29 @@ impl Explorer {
         }
     }
 
-    /// Builds the costmap, finds frontiers, chooses a goal and its path; checks progress.
-    /// Returns a command when a recovery starts.
-    fn replan(&mut self, input: &ExploreInput<'_>, reached: bool) -> Option<MotionCommand> {
-        let pose = input.pose;
-        self.replan_now = false;
-        self.last_plan_ns = Some(input.now_ns);
-        self.status.plans += 1;
-        let Some(robot_cell) = self.grid.cell_of(pose.x_m, pose.y_m) else {
-            // Off the grid's edge ([nav.grid] extent_m): nothing can be planned.
-            self.plan = None;
-            self.status.done = true;
-            return None;
-        };
+    /// Builds a costmap with `costmap`, finds the frontiers and chooses one (`previous`: the
+    /// goal being driven to, ranked cheaper); `None` when the robot lies outside the map's
+    /// window.
+    fn search(
+        &self,
+        costmap: CostmapConfig,
+        robot_cell: grid::CellIndex,
+        pose: &DeadReckonedPose,
+        previous: Option<(f64, f64)>,
+    ) -> Option<Search> {
         let fp = self.controller.footprint();
         let map = Costmap::build(
             &self.grid,
-            self.cfg.costmap,
+            costmap,
             fp.half_width_m(),
             fp.turn_radius_m(),
             robot_cell,
         );
-        let Some(start) = map.index(robot_cell) else {
-            self.plan = None;
-            return None;
-        };
+        let start = map.index(robot_cell)?;
         let field = CostField::from_start(&map, start);
         let grid = &self.grid;
         let centre = |i: usize| grid.centre(map.cell(i));
         let frontiers = find_frontiers(&map, &field, &self.cfg.frontier, centre);
-        self.status.frontiers = frontiers.len();
-        let previous = if reached {
-            None
-        } else {
-            self.plan.as_ref().map(|p| p.goal_m)
-        };
         let keep = self.cfg.frontier.keep_goal_m;
         let fcfg = self.cfg.frontier;
         let extra_cost = |f: &frontier::Frontier| {
@@ -598,8 +607,86 @@ impl Explorer {
             fcfg.turn_weight * turn.abs() - if kept { keep } else { 0.0 }
                 + if blind { fcfg.blind_cost_m } else { 0.0 }
         };
-        let chosen = choose(&frontiers, &fcfg, map.cell_m(), &self.blacklist, extra_cost).cloned();
-        let Some(f) = chosen else {
+        let chosen = choose(&frontiers, &fcfg, map.cell_m(), &self.blacklist, extra_cost)
+            .cloned()
+            .map(|f| {
+                let path = field
+                    .path_to(f.goal)
+                    .unwrap_or_default()
+                    .into_iter()
+                    .map(centre)
+                    .collect();
+                let goal_m = centre(f.goal);
+                (f, goal_m, path)
+            });
+        Some(Search {
+            frontiers: frontiers.len(),
+            chosen,
+        })
+    }
+
+    /// Builds the costmap, finds frontiers, chooses a goal and its path; checks progress.
+    /// Returns a command when a recovery starts.
+    fn replan(&mut self, input: &ExploreInput<'_>, reached: bool) -> Option<MotionCommand> {
+        let pose = input.pose;
+        self.replan_now = false;
+        self.last_plan_ns = Some(input.now_ns);
+        self.status.plans += 1;
+        let Some(robot_cell) = self.grid.cell_of(pose.x_m, pose.y_m) else {
+            // Off the grid's edge ([nav.grid] extent_m): nothing can be planned.
+            self.plan = None;
+            self.status.done = true;
+            return None;
+        };
+        let previous = if reached {
+            None
+        } else {
+            self.plan.as_ref().map(|p| p.goal_m)
+        };
+        // Nothing reachable with the usual clearance for `fallback_after_s` (a doorway drawn
+        // a cell too narrow by noise or drift closes it; a closing that a look around
+        // mends is left to it): the next frame searches again keeping only
+        // `fallback_clearance_m` (the controller still checks every motion against the
+        // occupied cells). One search a frame keeps a frame's decision time bounded.
+        let tight = std::mem::take(&mut self.search_tight);
+        let fallback = self.cfg.costmap.fallback_clearance_m;
+        let costmap = CostmapConfig {
+            clearance_m: if tight {
+                fallback
+            } else {
+                self.cfg.costmap.clearance_m
+            },
+            ..self.cfg.costmap
+        };
+        let Some(found) = self.search(costmap, robot_cell, &pose, previous) else {
+            self.plan = None;
+            return None;
+        };
+        let closed_for_s = self
+            .closed_since_ns
+            .map_or(0.0, |t| input.now_ns.saturating_sub(t) as f64 * 1e-9);
+        if found.chosen.is_none()
+            && !tight
+            && fallback < self.cfg.costmap.clearance_m
+            && closed_for_s >= self.cfg.costmap.fallback_after_s
+        {
+            // The plan in hand (if any) is followed for this one frame.
+            self.search_tight = true;
+            self.replan_now = true;
+            return None;
+        }
+        if tight && found.chosen.is_some() {
+            self.status.tight_plans += 1;
+        }
+        if !tight && found.chosen.is_some() {
+            self.closed_since_ns = None;
+        } else if found.chosen.is_none() {
+            self.closed_since_ns.get_or_insert(input.now_ns);
+        }
+        self.status.frontiers = found.frontiers;
+        let fcfg = self.cfg.frontier;
+        let chosen = found.chosen;
+        let Some((f, goal_m, path)) = chosen else {
             self.plan = None;
             self.status.done = true;
             // Everything left was given up on, or the map shows no way out (a wall seen
@@ -623,18 +710,11 @@ impl Explorer {
             return None;
         };
         self.status.done = false;
-        let goal_m = centre(f.goal);
         let new_goal =
             previous.is_none_or(|g| (g.0 - goal_m.0).hypot(g.1 - goal_m.1) > fcfg.same_goal_m);
         if new_goal {
             self.recoveries_for_goal = 0;
         }
-        let path: Vec<(f64, f64)> = field
-            .path_to(f.goal)
-            .unwrap_or_default()
-            .into_iter()
-            .map(centre)
-            .collect();
         self.plan = Some(Plan {
             goal_m,
             look_at_m: f.centroid_m,
@@ -670,6 +750,73 @@ impl Explorer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An explorer standing in a corridor 0.4 m wide (walls drawn on both sides, the near
+    /// end closed), seen free for 2 m ahead and unknown beyond: narrower than the robot's
+    /// width plus twice the usual clearance, wide enough for the robot's width.
+    fn explorer_in_a_narrow_corridor(fallback_clearance_m: f64) -> Explorer {
+        let mut cfg = NavConfig::default();
+        cfg.costmap.fallback_clearance_m = fallback_clearance_m;
+        let mut e = Explorer::new(cfg, &RobotConfig::default(), &PulseTable::default(), 0.2);
+        let origin = DeadReckonedPose {
+            x_m: 0.0,
+            y_m: 0.0,
+            heading_rad: 0.0,
+        };
+        let free_middle = DeadReckonedPose { x_m: 0.5, ..origin };
+        e.grid.clear_footprint(&free_middle, 1.0, 0.19);
+        e.grid.mark_bump(&origin, (-0.6, 1.5), (0.25, 0.25));
+        e.grid.mark_bump(&origin, (-0.6, 1.5), (-0.25, -0.25));
+        e.grid.mark_bump(&origin, (-0.55, -0.55), (-0.25, 0.25));
+        e
+    }
+
+    fn replan_in_corridor(e: &mut Explorer, now_ns: u64) {
+        let scan = ObstacleScan::default();
+        let input = ExploreInput {
+            pose: DeadReckonedPose {
+                x_m: 0.0,
+                y_m: 0.0,
+                heading_rad: 0.0,
+            },
+            scan: &scan,
+            front_m: None,
+            turn_rate_rad_s: 0.0,
+            distance_m: 0.0,
+            intersection: IntersectionType::Unknown,
+            now_ns,
+        };
+        let _ = e.replan(&input, false);
+    }
+
+    #[test]
+    fn a_passage_the_usual_clearance_closes_is_searched_again_with_the_fallback_clearance() {
+        // Without a fallback (not below the usual clearance) the corridor's end is out of
+        // reach: exploration is over.
+        let mut e = explorer_in_a_narrow_corridor(CostmapConfig::default().clearance_m);
+        replan_in_corridor(&mut e, 0);
+        assert!(e.status().done);
+        assert!(e.goal_m().is_none());
+        // With one: the first search finds nothing, as before ...
+        let mut e = explorer_in_a_narrow_corridor(0.0);
+        let wait_ns = (e.cfg.costmap.fallback_after_s * 1e9) as u64;
+        replan_in_corridor(&mut e, 0);
+        assert!(e.status().done);
+        assert!(!e.search_tight);
+        // ... and once nothing was found for `fallback_after_s`, a search finding nothing
+        // is not the last word ...
+        replan_in_corridor(&mut e, wait_ns);
+        assert!(e.goal_m().is_none());
+        assert!(e.search_tight && e.replan_now);
+        // ... the next frame's search, keeping less clearance, reaches the corridor's end.
+        replan_in_corridor(&mut e, wait_ns + 66_000_000);
+        let goal = e.goal_m().expect("a goal through the narrow corridor");
+        assert!(goal.0 > 1.0 && goal.1.abs() < 0.2, "{goal:?}");
+        assert_eq!(e.status().tight_plans, 1);
+        assert!(!e.status().done);
+        // The search after it tries the usual clearance first again.
+        assert!(!e.search_tight);
+    }
 
     #[test]
     fn a_picture_of_scattered_bins_in_the_middle_is_blind() {

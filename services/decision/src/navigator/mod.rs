@@ -345,7 +345,7 @@ impl Navigator {
         if let Some(e) = &self.explorer {
             let s = e.status();
             return format!(
-                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {}{}{}",
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}",
                 e.goal_m()
                     .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
                 s.plans,
@@ -355,6 +355,7 @@ impl Navigator {
                 s.scan_fixes,
                 s.position_fixes,
                 s.stalls,
+                s.tight_plans,
                 if e.recovering() { " recovering" } else { "" },
                 if s.done { " done" } else { "" },
             );
