@@ -58,7 +58,7 @@ type Chosen = (frontier::Frontier, (f64, f64), Vec<(f64, f64)>);
 struct Search {
     /// Frontier clusters found.
     frontiers: usize,
-    /// The chosen frontier, its goal cell's centre and the path there (grid frame, metres).
+    /// The frontier chosen, if any.
     chosen: Option<Chosen>,
 }
 
@@ -662,6 +662,7 @@ impl Explorer {
             self.plan = None;
             return None;
         };
+        self.status.frontiers = found.frontiers;
         let closed_for_s = self
             .closed_since_ns
             .map_or(0.0, |t| input.now_ns.saturating_sub(t) as f64 * 1e-9);
@@ -683,10 +684,8 @@ impl Explorer {
         } else if found.chosen.is_none() {
             self.closed_since_ns.get_or_insert(input.now_ns);
         }
-        self.status.frontiers = found.frontiers;
         let fcfg = self.cfg.frontier;
-        let chosen = found.chosen;
-        let Some((f, goal_m, path)) = chosen else {
+        let Some((f, goal_m, path)) = found.chosen else {
             self.plan = None;
             self.status.done = true;
             // Everything left was given up on, or the map shows no way out (a wall seen
