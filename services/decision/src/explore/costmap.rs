@@ -32,6 +32,9 @@ pub struct Costmap {
     unknown_dist_m: Vec<f32>,
     /// Per-cell state.
     state: Vec<CellState>,
+    /// Per-cell cost of standing there, metres of path (infinite when lethal): computed
+    /// once a build, as the planner asks for each cell up to eight times.
+    cell_cost_m: Vec<f64>,
     lethal_m: f64,
     /// Below this distance the robot cannot turn in place, metres.
     turn_m: f64,
@@ -74,18 +77,21 @@ impl Costmap {
         }
         let dist_m = chamfer_m(&state, cols, rows, cell_m, |s| s == CellState::Occupied);
         let unknown_dist_m = chamfer_m(&state, cols, rows, cell_m, |s| s == CellState::Unknown);
-        Self {
+        let mut map = Self {
             origin: (c0, r0),
             cols,
             rows,
             dist_m,
             unknown_dist_m,
             state,
+            cell_cost_m: Vec::new(),
             lethal_m: half_width_m + cfg.clearance_m,
             turn_m: turn_radius_m + cfg.clearance_m,
             cfg,
             cell_m,
-        }
+        };
+        map.cell_cost_m = (0..map.len()).map(|i| map.compute_cost_m(i)).collect();
+        map
     }
 
     /// Cell edge, metres.
@@ -140,6 +146,11 @@ impl Costmap {
 
     /// The cost of standing in a window cell, metres of path (infinite when lethal).
     pub fn cost_m(&self, i: usize) -> f64 {
+        self.cell_cost_m[i]
+    }
+
+    /// [`Costmap::cost_m`] from the distances.
+    fn compute_cost_m(&self, i: usize) -> f64 {
         let d = self.obstacle_distance_m(i);
         if d <= self.lethal_m {
             return f64::INFINITY;
