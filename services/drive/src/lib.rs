@@ -331,16 +331,19 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
             .and_then(|v| v.parse::<f64>().ok())
             .filter(|&at| (t - at).abs() < 0.5 * dt)
         {
-            eprintln!(
-                "local map at t {t:.2} (dead-reckoned pose {:.2},{:.2}):\n{}",
-                nd.pose.x_m,
-                nd.pose.y_m,
-                nav.local_map().ascii(nd.pose.x_m, nd.pose.y_m, 2.0, now)
-            );
             if let Some(e) = nav.explorer() {
                 eprintln!(
-                    "explorer grid:\n{}",
+                    "explorer grid at t {t:.2} (dead-reckoned pose {:.2},{:.2}):\n{}",
+                    nd.pose.x_m,
+                    nd.pose.y_m,
                     e.grid().ascii(nd.pose.x_m, nd.pose.y_m, 4.0)
+                );
+            } else {
+                eprintln!(
+                    "local map at t {t:.2} (dead-reckoned pose {:.2},{:.2}):\n{}",
+                    nd.pose.x_m,
+                    nd.pose.y_m,
+                    nav.local_map().ascii(nd.pose.x_m, nd.pose.y_m, 2.0, now)
                 );
             }
         }

@@ -203,7 +203,10 @@ impl Costmap {
 
 /// Distance from every window cell to the nearest cell whose state is `seed`, metres
 /// (capped at 1000 cells): a two-pass chamfer transform in thirds of a cell (3 straight, 4
-/// diagonal).
+/// diagonal). Each row first takes the finished row beside it (three independent minima
+/// per cell, which vectorise), then sweeps along itself: the only chain of dependent
+/// steps left is one add and one minimum per cell (the same minima as testing all four
+/// neighbours at once, in another order).
 fn chamfer_m(
     state: &[CellState],
     cols: usize,
@@ -211,52 +214,65 @@ fn chamfer_m(
     cell_m: f64,
     seed: impl Fn(CellState) -> bool,
 ) -> Vec<f32> {
-    const FAR: u32 = u32::MAX / 2;
-    let mut d: Vec<u32> = state
+    let seeded = state
         .iter()
-        .map(|&s| if seed(s) { 0 } else { FAR })
+        .map(|&s| if seed(s) { 0 } else { FAR_THIRDS })
         .collect();
+    chamfer_thirds(seeded, cols, rows)
+        .iter()
+        .map(|&v| (f64::from(v.min(3000)) / 3.0 * cell_m) as f32)
+        .collect()
+}
+
+/// Far, in thirds of a cell: no seed. Adding a step to it cannot overflow.
+const FAR_THIRDS: u32 = u32::MAX / 2;
+
+/// The chamfer transform of [`chamfer_m`] in thirds of a cell, over `d` (0 at the seeds,
+/// [`FAR_THIRDS`] elsewhere).
+fn chamfer_thirds(mut d: Vec<u32>, cols: usize, rows: usize) -> Vec<u32> {
+    const FAR: u32 = FAR_THIRDS;
     for r in 0..rows {
-        for c in 0..cols {
-            let i = r * cols + c;
-            let mut v = d[i];
-            if c > 0 {
-                v = v.min(d[i - 1] + 3);
-            }
-            if r > 0 {
-                v = v.min(d[i - cols] + 3);
-                if c > 0 {
-                    v = v.min(d[i - cols - 1] + 4);
-                }
-                if c + 1 < cols {
-                    v = v.min(d[i - cols + 1] + 4);
-                }
-            }
-            d[i] = v;
+        let (above, rest) = d.split_at_mut(r * cols);
+        let row = &mut rest[..cols];
+        if r > 0 {
+            take_row(row, &above[(r - 1) * cols..]);
+        }
+        let mut left = FAR;
+        for v in row.iter_mut() {
+            left = (*v).min(left + 3);
+            *v = left;
         }
     }
     for r in (0..rows).rev() {
-        for c in (0..cols).rev() {
-            let i = r * cols + c;
-            let mut v = d[i];
-            if c + 1 < cols {
-                v = v.min(d[i + 1] + 3);
-            }
-            if r + 1 < rows {
-                v = v.min(d[i + cols] + 3);
-                if c + 1 < cols {
-                    v = v.min(d[i + cols + 1] + 4);
-                }
-                if c > 0 {
-                    v = v.min(d[i + cols - 1] + 4);
-                }
-            }
-            d[i] = v;
+        let (upto, below) = d.split_at_mut((r + 1) * cols);
+        let row = &mut upto[r * cols..];
+        if r + 1 < rows {
+            take_row(row, below);
+        }
+        let mut right = FAR;
+        for v in row.iter_mut().rev() {
+            right = (*v).min(right + 3);
+            *v = right;
         }
     }
-    d.iter()
-        .map(|&v| (f64::from(v.min(3000)) / 3.0 * cell_m) as f32)
-        .collect()
+    d
+}
+
+/// Lowers each cell of `row` to its neighbour in `beside` (the row above or below) plus 3,
+/// or the diagonal ones plus 4.
+fn take_row(row: &mut [u32], beside: &[u32]) {
+    let n = row.len();
+    for (v, &b) in row.iter_mut().zip(beside) {
+        *v = (*v).min(b + 3);
+    }
+    if n > 1 {
+        for (v, &b) in row[1..].iter_mut().zip(&beside[..n - 1]) {
+            *v = (*v).min(b + 4);
+        }
+        for (v, &b) in row[..n - 1].iter_mut().zip(&beside[1..n]) {
+            *v = (*v).min(b + 4);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -280,6 +296,83 @@ mod tests {
             grid.insert(&pts);
         }
         grid
+    }
+
+    /// The chamfer transform testing the four finished neighbours of each cell in turn: what
+    /// [`chamfer_thirds`] must match.
+    fn chamfer_thirds_plain(mut d: Vec<u32>, cols: usize, rows: usize) -> Vec<u32> {
+        for r in 0..rows {
+            for c in 0..cols {
+                let i = r * cols + c;
+                let mut v = d[i];
+                if c > 0 {
+                    v = v.min(d[i - 1] + 3);
+                }
+                if r > 0 {
+                    v = v.min(d[i - cols] + 3);
+                    if c > 0 {
+                        v = v.min(d[i - cols - 1] + 4);
+                    }
+                    if c + 1 < cols {
+                        v = v.min(d[i - cols + 1] + 4);
+                    }
+                }
+                d[i] = v;
+            }
+        }
+        for r in (0..rows).rev() {
+            for c in (0..cols).rev() {
+                let i = r * cols + c;
+                let mut v = d[i];
+                if c + 1 < cols {
+                    v = v.min(d[i + 1] + 3);
+                }
+                if r + 1 < rows {
+                    v = v.min(d[i + cols] + 3);
+                    if c + 1 < cols {
+                        v = v.min(d[i + cols + 1] + 4);
+                    }
+                    if c > 0 {
+                        v = v.min(d[i + cols - 1] + 4);
+                    }
+                }
+                d[i] = v;
+            }
+        }
+        d
+    }
+
+    #[test]
+    fn the_row_at_a_time_chamfer_transform_matches_the_cell_at_a_time_one() {
+        // Seeds at the window's corners and edges, in clusters and alone; one-row and
+        // one-column windows too.
+        let mut seed = 0x9e37_79b9_u64;
+        for (cols, rows) in [(23, 17), (1, 9), (9, 1), (1, 1), (2, 2)] {
+            let state: Vec<CellState> = (0..cols * rows)
+                .map(|i| {
+                    seed = seed
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    match (seed >> 60, i) {
+                        (_, 0) | (0, _) => CellState::Occupied,
+                        (1..=5, _) => CellState::Unknown,
+                        _ => CellState::Free,
+                    }
+                })
+                .collect();
+            for wanted in [CellState::Occupied, CellState::Unknown, CellState::Free] {
+                let seeded: Vec<u32> = state
+                    .iter()
+                    .map(|&s| if s == wanted { 0 } else { FAR_THIRDS })
+                    .collect();
+                let fast = chamfer_thirds(seeded.clone(), cols, rows);
+                let plain = chamfer_thirds_plain(seeded, cols, rows);
+                assert_eq!(fast, plain, "{cols}x{rows}, {wanted:?}");
+            }
+            // With no seed every cell is capped far.
+            let none = chamfer_m(&state, cols, rows, 0.1, |_| false);
+            assert!(none.iter().all(|&d| (d - 100.0).abs() < 1e-3));
+        }
     }
 
     #[test]

@@ -49,20 +49,29 @@ fn is_frontier(map: &Costmap, i: usize) -> bool {
         .any(|j| map.state(j) == CellState::Unknown)
 }
 
-/// Every frontier cluster with a reachable cell; `centre` maps a window index to metres.
+/// Which window cells are frontier cells (free, with an unknown 4-neighbour), by window
+/// index: what [`CostField::to_targets`] must reach and [`find_frontiers`] clusters.
+pub fn frontier_cells(map: &Costmap) -> Vec<bool> {
+    (0..map.len()).map(|i| is_frontier(map, i)).collect()
+}
+
+/// Every frontier cluster with a reachable cell; `is_frontier` is [`frontier_cells`] of
+/// `map`, `field` holds the final path costs of those cells at least, and `centre` maps a
+/// window index to metres.
 pub fn find_frontiers(
     map: &Costmap,
     field: &CostField,
+    is_frontier: &[bool],
     cfg: &FrontierConfig,
     centre: impl Fn(usize) -> (f64, f64),
 ) -> Vec<Frontier> {
-    let n = map.len();
+    let n = map.len().min(is_frontier.len());
     let mut seen = vec![false; n];
     let mut out = Vec::new();
     let min_cells = (cfg.min_size_m / map.cell_m()).ceil() as usize;
     let mut queue = VecDeque::new();
     for start in 0..n {
-        if seen[start] || !is_frontier(map, start) {
+        if seen[start] || !is_frontier[start] {
             continue;
         }
         seen[start] = true;
@@ -79,7 +88,7 @@ pub fn find_frontiers(
                 best = Some((i, d));
             }
             for (j, _) in map.neighbours(i) {
-                if !seen[j] && is_frontier(map, j) {
+                if !seen[j] && is_frontier[j] {
                     seen[j] = true;
                     queue.push_back(j);
                 }

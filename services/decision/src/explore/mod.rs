@@ -35,7 +35,7 @@ use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 use controller::{ControlInput, Controller, wrap_rad};
 use costmap::Costmap;
-use frontier::{Blacklist, choose, find_frontiers};
+use frontier::{Blacklist, choose, find_frontiers, frontier_cells};
 use grid::OccupancyGrid;
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
@@ -590,10 +590,11 @@ impl Explorer {
             robot_cell,
         );
         let start = map.index(robot_cell)?;
-        let field = CostField::from_start(&map, start);
+        let is_frontier = frontier_cells(&map);
+        let field = CostField::to_targets(&map, start, &is_frontier);
         let grid = &self.grid;
         let centre = |i: usize| grid.centre(map.cell(i));
-        let frontiers = find_frontiers(&map, &field, &self.cfg.frontier, centre);
+        let frontiers = find_frontiers(&map, &field, &is_frontier, &self.cfg.frontier, centre);
         let keep = self.cfg.frontier.keep_goal_m;
         let fcfg = self.cfg.frontier;
         let extra_cost = |f: &frontier::Frontier| {

@@ -41,22 +41,54 @@ impl PartialOrd for Entry {
 }
 
 impl CostField {
-    /// Runs Dijkstra from window cell `start`.
+    /// Runs Dijkstra from window cell `start` over the whole window.
     pub fn from_start(map: &Costmap, start: usize) -> Self {
+        Self::search(map, start, None)
+    }
+
+    /// Runs Dijkstra from window cell `start` until every cell marked in `targets` (by
+    /// window index) is settled or found unreachable: their costs and paths are those of
+    /// [`CostField::from_start`] (a settled cell's cost and parent never change, and the
+    /// cells on its path were settled before it); any other cell not settled by then reads
+    /// as unreachable. The explorer needs the frontier cells only, and they lie on the
+    /// near side of the unknown cells that fill the rest of the window.
+    pub fn to_targets(map: &Costmap, start: usize, targets: &[bool]) -> Self {
+        Self::search(map, start, Some(targets))
+    }
+
+    /// Dijkstra, stopping early once every target is settled when there are targets.
+    fn search(map: &Costmap, start: usize, targets: Option<&[bool]>) -> Self {
         let n = map.len();
+        // Targets not yet settled, and which cells are settled (only when stopping early).
+        let mut left = targets.map_or(0, |t| t.iter().take(n).filter(|&&x| x).count());
+        let mut settled = vec![false; if targets.is_some() { n } else { 0 }];
         let mut cost = vec![f64::INFINITY; n];
         let mut parent = vec![u32::MAX; n];
         let mut heap = BinaryHeap::new();
         cost[start] = 0.0;
-        heap.push(Entry {
-            cost: 0.0,
-            cell: start,
-        });
+        if targets.is_some() && left == 0 {
+            // Nothing to reach: the start is all there is.
+            settled[start] = true;
+        } else {
+            heap.push(Entry {
+                cost: 0.0,
+                cell: start,
+            });
+        }
         let cell_m = map.cell_m();
         let escape_cost_m = map.escape_cost_m();
         while let Some(Entry { cost: c, cell }) = heap.pop() {
             if c > cost[cell] {
                 continue;
+            }
+            if let Some(t) = targets {
+                settled[cell] = true;
+                if t.get(cell).copied().unwrap_or(false) {
+                    left -= 1;
+                    if left == 0 {
+                        break;
+                    }
+                }
             }
             let escaping = map.is_lethal(cell);
             for (next, len) in map.neighbours(cell) {
@@ -81,6 +113,14 @@ impl CostField {
                         cost: nc,
                         cell: next,
                     });
+                }
+            }
+        }
+        if targets.is_some() {
+            for ((c, p), &done) in cost.iter_mut().zip(&mut parent).zip(&settled) {
+                if !done {
+                    *c = f64::INFINITY;
+                    *p = u32::MAX;
                 }
             }
         }
@@ -124,11 +164,10 @@ mod tests {
     use hvs_runtime::config::{CostmapConfig, GridConfig};
     use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
 
-    #[test]
-    fn a_path_goes_around_a_wall_and_not_through_it() {
+    /// A grid with a wall segment 1.5 m ahead, seen from the start, and free space around
+    /// it from scans taken beside it.
+    fn wall_ahead() -> OccupancyGrid {
         let mut grid = OccupancyGrid::new(GridConfig::default());
-        // A wall segment 1.5 m ahead, seen from the start; free space around it from
-        // scans taken beside it.
         let mut scan = ObstacleScan {
             tan_half_fov: 0.3,
             ..ObstacleScan::default()
@@ -151,6 +190,12 @@ mod tests {
                 grid.insert(&pts);
             }
         }
+        grid
+    }
+
+    #[test]
+    fn a_path_goes_around_a_wall_and_not_through_it() {
+        let grid = wall_ahead();
         let robot = grid.cell_of(0.5, 0.0).expect("inside");
         let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, 0.27, robot);
         let idx = |x: f64, y: f64| {
@@ -168,5 +213,57 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(detour > 0.5, "the path must go round the wall: {detour}");
         assert!(field.cost_m(goal) > 1.8);
+    }
+
+    #[test]
+    fn a_search_to_targets_gives_them_the_whole_searchs_costs_and_paths() {
+        let grid = wall_ahead();
+        let robot = grid.cell_of(0.5, 0.0).expect("inside");
+        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, 0.27, robot);
+        let start = map.index(robot).expect("inside");
+        let whole = CostField::from_start(&map, start);
+        let frontiers = crate::explore::frontier::frontier_cells(&map);
+        assert!(frontiers.iter().filter(|&&f| f).count() > 10);
+        let behind_wall = grid
+            .cell_of(2.3, 0.0)
+            .and_then(|c| map.index(c))
+            .expect("inside");
+        let mut one = vec![false; map.len()];
+        one[behind_wall] = true;
+        for (targets, stops_early) in [(frontiers, false), (one, true)] {
+            let part = CostField::to_targets(&map, start, &targets);
+            let mut cut = 0;
+            for (i, &target) in targets.iter().enumerate() {
+                if target {
+                    assert_eq!(
+                        part.cost_m(i).to_bits(),
+                        whole.cost_m(i).to_bits(),
+                        "cell {i}"
+                    );
+                    assert_eq!(part.path_to(i), whole.path_to(i), "cell {i}");
+                } else if part.cost_m(i).is_finite() {
+                    // A cell settled on the way: final too.
+                    assert_eq!(
+                        part.cost_m(i).to_bits(),
+                        whole.cost_m(i).to_bits(),
+                        "cell {i}"
+                    );
+                } else if whole.cost_m(i).is_finite() {
+                    cut += 1;
+                }
+            }
+            if stops_early {
+                assert!(cut > 0, "the search must stop before the farthest cells");
+            }
+        }
+        // No target: only the start.
+        let none = CostField::to_targets(&map, start, &vec![false; map.len()]);
+        assert_eq!(none.cost_m(start), 0.0);
+        assert_eq!(
+            (0..map.len())
+                .filter(|&i| none.cost_m(i).is_finite())
+                .count(),
+            1
+        );
     }
 }
