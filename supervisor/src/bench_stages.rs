@@ -89,7 +89,11 @@ pub fn run(config_path: &std::path::Path, frames: usize) -> Result<()> {
         let mut nav = Navigator::new(&decision_cfg, &config.robot, &config.actuator.pulses);
         let mut t_ns = 0u64;
         row(
-            "decision (navigator+local map)",
+            if decision_cfg.policy == hvs_runtime::config::DecisionPolicy::Explore {
+                "decision (navigator, explore's grid)"
+            } else {
+                "decision (navigator+local map)"
+            },
             time_us(frames, || {
                 t_ns += 33_000_000;
                 std::hint::black_box(nav.decide(&windows, f.windows as usize, &scan, t_ns));

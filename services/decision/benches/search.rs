@@ -11,7 +11,7 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use hvs_decision::DeadReckonedPose;
 use hvs_decision::explore::costmap::Costmap;
-use hvs_decision::explore::frontier::{find_frontiers, frontier_cells};
+use hvs_decision::explore::frontier::{find_frontiers, frontier_cells, search_targets};
 use hvs_decision::explore::grid::OccupancyGrid;
 use hvs_decision::explore::planner::CostField;
 use hvs_runtime::config::{CostmapConfig, FrontierConfig, GridConfig, RobotConfig};
@@ -105,7 +105,8 @@ fn bench(c: &mut Criterion) {
         panic!("the robot's cell is outside the costmap's window");
     };
     let is_frontier = frontier_cells(&map);
-    let field = CostField::to_targets(&map, start, &is_frontier);
+    let targets = search_targets(&map, start, &is_frontier);
+    let field = CostField::to_targets(&map, start, &targets);
     let centre = |i: usize| grid.centre(map.cell(i));
     let frontiers = find_frontiers(
         &map,
@@ -130,9 +131,9 @@ fn bench(c: &mut Criterion) {
         b.iter(|| black_box(CostField::from_start(black_box(&map), start)))
     });
     group.bench_function("cost_field_to_frontiers", |b| {
-        b.iter(|| black_box(CostField::to_targets(black_box(&map), start, &is_frontier)))
+        b.iter(|| black_box(CostField::to_targets(black_box(&map), start, &targets)))
     });
-    group.bench_function("frontiers", |b| {
+    group.bench_function("frontier_cells_and_clusters", |b| {
         b.iter(|| {
             let is_frontier = frontier_cells(&map);
             black_box(find_frontiers(

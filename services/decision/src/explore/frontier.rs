@@ -55,6 +55,22 @@ pub fn frontier_cells(map: &Costmap) -> Vec<bool> {
     (0..map.len()).map(|i| is_frontier(map, i)).collect()
 }
 
+/// The frontier cells the planner's search from window cell `start` must settle: all of
+/// them from a lethal start, else those outside the lethal band. From a start outside it
+/// no lethal cell is ever entered, so a lethal frontier cell is unreachable; left out of
+/// the targets it does not keep the search going to the window's end (the costs are the
+/// same either way).
+pub fn search_targets(map: &Costmap, start: usize, is_frontier: &[bool]) -> Vec<bool> {
+    if map.is_lethal(start) {
+        return is_frontier.to_vec();
+    }
+    is_frontier
+        .iter()
+        .enumerate()
+        .map(|(i, &f)| f && !map.is_lethal(i))
+        .collect()
+}
+
 /// Every frontier cluster with a reachable cell; `is_frontier` is [`frontier_cells`] of
 /// `map`, `field` holds the final path costs of those cells at least, and `centre` maps a
 /// window index to metres.
@@ -65,13 +81,15 @@ pub fn find_frontiers(
     cfg: &FrontierConfig,
     centre: impl Fn(usize) -> (f64, f64),
 ) -> Vec<Frontier> {
-    let n = map.len().min(is_frontier.len());
+    let n = map.len();
+    // A mask of another window's size marks nothing beyond its end.
+    let is_frontier = |i: usize| is_frontier.get(i).copied().unwrap_or(false);
     let mut seen = vec![false; n];
     let mut out = Vec::new();
     let min_cells = (cfg.min_size_m / map.cell_m()).ceil() as usize;
     let mut queue = VecDeque::new();
     for start in 0..n {
-        if seen[start] || !is_frontier[start] {
+        if seen[start] || !is_frontier(start) {
             continue;
         }
         seen[start] = true;
@@ -88,7 +106,7 @@ pub fn find_frontiers(
                 best = Some((i, d));
             }
             for (j, _) in map.neighbours(i) {
-                if !seen[j] && is_frontier[j] {
+                if !seen[j] && is_frontier(j) {
                     seen[j] = true;
                     queue.push_back(j);
                 }

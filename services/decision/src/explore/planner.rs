@@ -230,6 +230,20 @@ mod tests {
             .expect("inside");
         let mut one = vec![false; map.len()];
         one[behind_wall] = true;
+        // The frontier cells outside the lethal band, as the explorer asks for them.
+        let reachable = crate::explore::frontier::search_targets(&map, start, &frontiers);
+        assert!(
+            reachable.iter().filter(|&&f| f).count() < frontiers.iter().filter(|&&f| f).count()
+        );
+        let part = CostField::to_targets(&map, start, &reachable);
+        for (i, _) in frontiers.iter().enumerate().filter(|(_, f)| **f) {
+            assert_eq!(
+                part.cost_m(i).to_bits(),
+                whole.cost_m(i).to_bits(),
+                "cell {i}"
+            );
+            assert_eq!(part.path_to(i), whole.path_to(i), "cell {i}");
+        }
         for (targets, stops_early) in [(frontiers, false), (one, true)] {
             let part = CostField::to_targets(&map, start, &targets);
             let mut cut = 0;
