@@ -89,10 +89,10 @@ pub fn run(config_path: &std::path::Path, frames: usize) -> Result<()> {
         let mut nav = Navigator::new(&decision_cfg, &config.robot, &config.actuator.pulses);
         let mut t_ns = 0u64;
         row(
-            if decision_cfg.policy == hvs_runtime::config::DecisionPolicy::Explore {
-                "decision (navigator, explore's grid)"
-            } else {
+            if decision_cfg.fills_local_map() {
                 "decision (navigator+local map)"
+            } else {
+                "decision (navigator, explore's grid)"
             },
             time_us(frames, || {
                 t_ns += 33_000_000;

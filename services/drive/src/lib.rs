@@ -132,8 +132,7 @@ pub struct DriveReport {
     pub decisions: u64,
     /// Whether the visit memory was on.
     pub visit_memory: bool,
-    /// Whether the local occupancy map was filled (`decision.local_map`, and never under
-    /// `policy = "explore"`, which maps into its own grid).
+    /// Whether the local occupancy map was filled (`DecisionConfig::fills_local_map`).
     pub local_map: bool,
     /// Collisions with walls (sim ground truth).
     pub collisions: u64,
@@ -424,8 +423,7 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
         duration_s,
         decisions: steps,
         visit_memory: decision_cfg.visit_memory,
-        local_map: decision_cfg.local_map
-            && decision_cfg.policy != hvs_runtime::config::DecisionPolicy::Explore,
+        local_map: decision_cfg.fills_local_map(),
         collisions: truth.collisions,
         distinct_cells: cells.len(),
         distance_m,

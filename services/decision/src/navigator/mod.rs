@@ -453,7 +453,7 @@ impl Navigator {
         let pose = self.odometry.pose();
         // The exploring navigator keeps its own grid: the local map is the other policies'
         // (filling it cost a tenth of a millisecond a frame for nothing).
-        if self.cfg.local_map && self.explorer.is_none() && scan.valid_bins() > 0 {
+        if self.cfg.fills_local_map() && scan.valid_bins() > 0 {
             self.map
                 .insert_scan(&pose, self.camera_forward_m, scan, MAP_RANGE_M, now_ns);
         }

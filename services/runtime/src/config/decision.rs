@@ -119,6 +119,12 @@ impl Default for DecisionConfig {
 }
 
 impl DecisionConfig {
+    /// Whether the decision stage fills the local occupancy map: `local_map` on, and never
+    /// under `policy = "explore"`, which maps into its own grid.
+    pub fn fills_local_map(&self) -> bool {
+        self.local_map && self.policy != DecisionPolicy::Explore
+    }
+
     /// Checks the section's values; the key of an error is below the section.
     pub fn validate(&self) -> Result<(), Invalid> {
         for (key, t) in [("lo", self.lo), ("hi", self.hi)] {
