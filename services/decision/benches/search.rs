@@ -11,7 +11,7 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use hvs_decision::DeadReckonedPose;
 use hvs_decision::explore::costmap::Costmap;
-use hvs_decision::explore::frontier::{find_frontiers, frontier_cells, search_targets};
+use hvs_decision::explore::frontier::{find_frontiers, frontier_cells};
 use hvs_decision::explore::grid::OccupancyGrid;
 use hvs_decision::explore::planner::CostField;
 use hvs_runtime::config::{CostmapConfig, FrontierConfig, GridConfig, RobotConfig};
@@ -105,8 +105,7 @@ fn bench(c: &mut Criterion) {
         panic!("the robot's cell is outside the costmap's window");
     };
     let is_frontier = frontier_cells(&map);
-    let targets = search_targets(&map, start, &is_frontier);
-    let field = CostField::to_targets(&map, start, &targets);
+    let field = CostField::to_targets(&map, start, &is_frontier);
     let centre = |i: usize| grid.centre(map.cell(i));
     let frontiers = find_frontiers(
         &map,
@@ -131,7 +130,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| black_box(CostField::from_start(black_box(&map), start)))
     });
     group.bench_function("cost_field_to_frontiers", |b| {
-        b.iter(|| black_box(CostField::to_targets(black_box(&map), start, &targets)))
+        b.iter(|| black_box(CostField::to_targets(black_box(&map), start, &is_frontier)))
     });
     group.bench_function("frontier_cells_and_clusters", |b| {
         b.iter(|| {

@@ -376,6 +376,42 @@ mod tests {
     }
 
     #[test]
+    fn every_cell_has_the_window_cells_around_it_as_neighbours_in_one_order() {
+        let grid = looked_east(1.5, 0.2);
+        let c0 = grid.cell_of(0.0, 0.0).expect("inside");
+        let map = Costmap::build(&grid, CostmapConfig::default(), 0.155, 0.27, c0);
+        let (_, cols, rows) = map.window();
+        assert!(cols > 2 && rows > 2);
+        let order = [
+            (1, 0),
+            (-1, 0),
+            (0, 1),
+            (0, -1),
+            (1, 1),
+            (1, -1),
+            (-1, 1),
+            (-1, -1),
+        ];
+        for i in 0..map.len() {
+            let (c, r) = ((i % cols) as i64, (i / cols) as i64);
+            let expected: Vec<(usize, f64)> = order
+                .iter()
+                .filter(|&&(dc, dr)| {
+                    (0..cols as i64).contains(&(c + dc)) && (0..rows as i64).contains(&(r + dr))
+                })
+                .map(|&(dc, dr)| {
+                    let len = if dc != 0 && dr != 0 { 2f64.sqrt() } else { 1.0 };
+                    (((r + dr) * cols as i64 + c + dc) as usize, len)
+                })
+                .collect();
+            let got: Vec<(usize, f64)> = map.neighbours(i).collect();
+            assert_eq!(got, expected, "cell {i} ({c}, {r}) of {cols}x{rows}");
+            let interior = c > 0 && r > 0 && c + 1 < cols as i64 && r + 1 < rows as i64;
+            assert_eq!(got.len() == 8, interior, "cell {i}");
+        }
+    }
+
+    #[test]
     fn cells_near_a_wall_are_lethal_and_cost_falls_with_distance() {
         let grid = looked_east(1.5, 0.2);
         let robot = grid.cell_of(0.0, 0.0).expect("inside");

@@ -55,22 +55,6 @@ pub fn frontier_cells(map: &Costmap) -> Vec<bool> {
     (0..map.len()).map(|i| is_frontier(map, i)).collect()
 }
 
-/// The frontier cells the planner's search from window cell `start` must settle: all of
-/// them from a lethal start, else those outside the lethal band. From a start outside it
-/// no lethal cell is ever entered, so a lethal frontier cell is unreachable; left out of
-/// the targets it does not keep the search going to the window's end (the costs are the
-/// same either way).
-pub fn search_targets(map: &Costmap, start: usize, is_frontier: &[bool]) -> Vec<bool> {
-    if map.is_lethal(start) {
-        return is_frontier.to_vec();
-    }
-    is_frontier
-        .iter()
-        .enumerate()
-        .map(|(i, &f)| f && !map.is_lethal(i))
-        .collect()
-}
-
 /// Every frontier cluster with a reachable cell; `is_frontier` is [`frontier_cells`] of
 /// `map`, `field` holds the final path costs of those cells at least, and `centre` maps a
 /// window index to metres.

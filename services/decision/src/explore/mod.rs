@@ -35,7 +35,7 @@ use crate::local_map::CellState;
 use crate::odometry::DeadReckonedPose;
 use controller::{ControlInput, Controller, wrap_rad};
 use costmap::Costmap;
-use frontier::{Blacklist, choose, find_frontiers, frontier_cells, search_targets};
+use frontier::{Blacklist, choose, find_frontiers, frontier_cells};
 use grid::OccupancyGrid;
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
@@ -591,8 +591,7 @@ impl Explorer {
         );
         let start = map.index(robot_cell)?;
         let is_frontier = frontier_cells(&map);
-        let targets = search_targets(&map, start, &is_frontier);
-        let field = CostField::to_targets(&map, start, &targets);
+        let field = CostField::to_targets(&map, start, &is_frontier);
         let grid = &self.grid;
         let centre = |i: usize| grid.centre(map.cell(i));
         let frontiers = find_frontiers(&map, &field, &is_frontier, &self.cfg.frontier, centre);
