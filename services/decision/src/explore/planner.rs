@@ -245,12 +245,13 @@ mod tests {
         // Some frontier cells lie in the lethal band, where a search from outside it never
         // goes: they read unreachable in both searches, and do not keep the search going.
         assert!(!map.is_lethal(start));
-        let lethal_frontiers = frontiers
-            .iter()
-            .enumerate()
-            .filter(|&(i, &f)| f && map.is_lethal(i))
-            .count();
-        assert!(lethal_frontiers > 0);
+        let lethal_frontiers: Vec<usize> = (0..map.len())
+            .filter(|&i| frontiers[i] && map.is_lethal(i))
+            .collect();
+        assert!(!lethal_frontiers.is_empty());
+        for &i in &lethal_frontiers {
+            assert!(!whole.cost_m(i).is_finite(), "lethal frontier cell {i}");
+        }
         for (targets, stops_early) in [(frontiers, true), (one, true)] {
             let part = CostField::to_targets(&map, start, &targets);
             let mut cut = 0;
