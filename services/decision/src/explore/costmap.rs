@@ -180,6 +180,30 @@ impl Costmap {
         wall + turn + unknown + near_unknown
     }
 
+    /// [`Costmap::neighbours`] (the same cells, lengths and order) handed to `f`, with the
+    /// interior cells' eight offsets taken without bounds arithmetic: the planner's inner
+    /// loop.
+    #[inline]
+    pub fn for_each_neighbour(&self, i: usize, mut f: impl FnMut(usize, f64)) {
+        let w = self.cols;
+        let (c, r) = (i % w, i / w);
+        if c > 0 && r > 0 && c + 1 < w && r + 1 < self.rows {
+            const D: f64 = std::f64::consts::SQRT_2;
+            f(i + 1, 1.0);
+            f(i - 1, 1.0);
+            f(i + w, 1.0);
+            f(i - w, 1.0);
+            f(i + w + 1, D);
+            f(i - w + 1, D);
+            f(i + w - 1, D);
+            f(i - w - 1, D);
+        } else {
+            for (j, len) in self.neighbours(i) {
+                f(j, len);
+            }
+        }
+    }
+
     /// The 8 neighbours of a window cell with their step length in cells.
     pub fn neighbours(&self, i: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
         let (c, r) = ((i % self.cols) as i64, (i / self.cols) as i64);
@@ -406,6 +430,9 @@ mod tests {
                 .collect();
             let got: Vec<(usize, f64)> = map.neighbours(i).collect();
             assert_eq!(got, expected, "cell {i} ({c}, {r}) of {cols}x{rows}");
+            let mut handed = Vec::new();
+            map.for_each_neighbour(i, |j, len| handed.push((j, len)));
+            assert_eq!(handed, expected, "cell {i} ({c}, {r}) of {cols}x{rows}");
             let interior = c > 0 && r > 0 && c + 1 < cols as i64 && r + 1 < rows as i64;
             assert_eq!(got.len() == 8, interior, "cell {i}");
         }

@@ -19,10 +19,35 @@ pub struct CostField {
     start: usize,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A queue entry. Path costs are never negative (every step adds a positive length), and
+/// the bit patterns of non-negative `f64`s order as the numbers do, so the heap compares
+/// them as integers: the same order as `f64::total_cmp`, for fewer instructions in the
+/// search's hottest loop (the heap's sift-down).
+#[derive(Debug, Clone, Copy)]
 struct Entry {
-    cost: f64,
+    /// `cost.to_bits()` of the path cost, metres.
+    cost_bits: u64,
     cell: usize,
+}
+
+impl Entry {
+    fn new(cost_m: f64, cell: usize) -> Self {
+        debug_assert!(cost_m >= 0.0, "path costs are never negative");
+        Self {
+            cost_bits: cost_m.to_bits(),
+            cell,
+        }
+    }
+
+    fn cost_m(&self) -> f64 {
+        f64::from_bits(self.cost_bits)
+    }
+}
+
+impl PartialEq for Entry {
+    fn eq(&self, other: &Self) -> bool {
+        self.cost_bits == other.cost_bits
+    }
 }
 
 impl Eq for Entry {}
@@ -30,7 +55,7 @@ impl Eq for Entry {}
 impl Ord for Entry {
     fn cmp(&self, other: &Self) -> Ordering {
         // Min-heap on cost.
-        other.cost.total_cmp(&self.cost)
+        other.cost_bits.cmp(&self.cost_bits)
     }
 }
 
@@ -82,14 +107,12 @@ impl CostField {
             // Nothing to reach: the start is all there is.
             settled[start] = true;
         } else {
-            heap.push(Entry {
-                cost: 0.0,
-                cell: start,
-            });
+            heap.push(Entry::new(0.0, start));
         }
         let cell_m = map.cell_m();
         let escape_cost_m = map.escape_cost_m();
-        while let Some(Entry { cost: c, cell }) = heap.pop() {
+        while let Some(entry) = heap.pop() {
+            let (c, cell) = (entry.cost_m(), entry.cell);
             if c > cost[cell] {
                 continue;
             }
@@ -103,30 +126,29 @@ impl CostField {
                 }
             }
             let escaping = map.is_lethal(cell);
-            for (next, len) in map.neighbours(cell) {
-                let step = if map.is_lethal(next) {
+            map.for_each_neighbour(cell, |next, len| {
+                // A lethal cell's standing cost is infinite, and only a lethal cell's is.
+                let stand_m = map.cost_m(next);
+                let step = if stand_m.is_infinite() {
                     // Escaping means moving away from the obstacle: a lethal start may not
                     // follow the lethal band along a wall.
                     if !escaping
                         || map.obstacle_distance_m(next) < 0.5 * cell_m
                         || map.obstacle_distance_m(next) <= map.obstacle_distance_m(cell)
                     {
-                        continue;
+                        return;
                     }
                     len * (cell_m + escape_cost_m)
                 } else {
-                    len * cell_m + map.cost_m(next)
+                    len * cell_m + stand_m
                 };
                 let nc = c + step;
                 if nc < cost[next] {
                     cost[next] = nc;
                     parent[next] = cell as u32;
-                    heap.push(Entry {
-                        cost: nc,
-                        cell: next,
-                    });
+                    heap.push(Entry::new(nc, next));
                 }
-            }
+            });
         }
         if targets.is_some() {
             for ((c, p), &done) in cost.iter_mut().zip(&mut parent).zip(&settled) {
