@@ -183,7 +183,7 @@ impl Costmap {
     /// [`Costmap::neighbours`] (the same cells, lengths and order) handed to `f`, with the
     /// interior cells' eight offsets taken without bounds arithmetic: the planner's inner
     /// loop.
-    #[inline]
+    #[inline(always)]
     pub fn for_each_neighbour(&self, i: usize, mut f: impl FnMut(usize, f64)) {
         let w = self.cols;
         let (c, r) = (i % w, i / w);
