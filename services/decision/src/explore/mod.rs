@@ -79,6 +79,9 @@ pub struct ExploreStatus {
     pub position_fixes: u64,
     /// Stalls found (the picture unchanged while dead reckoning moved).
     pub stalls: u64,
+    /// Headings re-found over the arc turned while the scan could not be aligned
+    /// (`[nav.scan_match] reacquire_turn_deg`).
+    pub reacquired: u64,
     /// Plans that found a frontier only with `[nav.costmap] fallback_clearance_m`.
     pub tight_plans: u64,
     /// No reachable frontier is left.
@@ -185,6 +188,9 @@ pub struct Explorer {
     last_turn_stall_m: Option<(f64, f64)>,
     /// A stall was found this frame: recover before anything else.
     stalled: bool,
+    /// Dead reckoning's heading at the last frame and the turn it made since the scan last
+    /// had points enough to align (`None`: this frame's scan had).
+    unaligned: Option<(f64, f64)>,
     /// The last command sent.
     last_command: MotionCommand,
     status: ExploreStatus,
@@ -220,6 +226,7 @@ impl Explorer {
             stall: StallCheck::new(cfg.stall),
             last_turn_stall_m: None,
             stalled: false,
+            unaligned: None,
             last_command: MotionCommand::Stop,
             status: ExploreStatus::default(),
         }
@@ -285,13 +292,37 @@ impl Explorer {
                 overlap: 0.0,
             });
         }
+        let points: Vec<(f64, f64)> = self.grid.scan_hits_robot_frame(scan, self.camera_forward_m);
+        let cfg = &self.cfg.scan_match;
+        let alignable = points.len() >= cfg.min_points as usize;
+        // The turn dead reckoning made since the scan last had points enough to align.
+        self.unaligned = match self.unaligned {
+            Some((last, turned)) => {
+                Some((pose.heading_rad, turned + wrap_rad(pose.heading_rad - last)))
+            }
+            None if !alignable => Some((pose.heading_rad, 0.0)),
+            None => None,
+        };
         // Early scans would be aligned to themselves; a scan taken while turning fast is
         // placed by a heading that leads the camera's, and is not added to the grid either.
         if self.status.plans < 3 || !self.scan_placeable(turn_rate_rad_s) {
             return None;
         }
-        let points: Vec<(f64, f64)> = self.grid.scan_hits_robot_frame(scan, self.camera_forward_m);
-        let cfg = &self.cfg.scan_match;
+        // The arc stays open until a scan has points enough for the wide search.
+        let enough = points.len() >= cfg.min_points.max(cfg.reacquire_min_points) as usize;
+        if enough && let Some((_, turned)) = self.unaligned.take() {
+            let reacquire_rad = cfg.reacquire_turn_deg.to_radians();
+            if reacquire_rad > 0.0
+                && turned.abs() >= reacquire_rad
+                && let Some(fix) =
+                    scan_match::align_over_arc(&self.grid, pose, &points, cfg, turned)
+            {
+                self.status.reacquired += 1;
+                self.status.scan_fixes += 1;
+                self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);
+                return Some(fix);
+            }
+        }
         let g = cfg.gain;
         let searched =
             scan_match::align(&self.grid, pose, &points, cfg).map(|fix| PoseCorrection {

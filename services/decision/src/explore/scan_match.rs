@@ -3,7 +3,9 @@
 //! at which the scan's points fall best on the grid's occupied cells (a brute-force
 //! correlative matcher, as in Olson's real-time correlative scan matching, without the
 //! multi-resolution step: the window is small); then, with `position` on, the position is
-//! refined by point-to-wall alignment ([`refine_position`]).
+//! refined by point-to-wall alignment ([`refine_position`]). After a turn made while the
+//! scan showed too little to align, the heading can be searched over the whole arc turned
+//! ([`align_over_arc`], `reacquire_turn_deg`, off by default).
 
 use hvs_runtime::config::ScanMatchConfig;
 
@@ -93,6 +95,60 @@ pub fn align(
     Some(PoseCorrection {
         dx_m: dx,
         dy_m: dy,
+        dheading_rad: dth,
+        overlap,
+    })
+}
+
+/// The heading re-found after a blind turn: `points` (robot frame, metres) scored at every
+/// heading from `pose`'s back to where dead reckoning says the turn began (`turned_rad`
+/// before it; the true heading lies in between when the turn was held) and `search_deg`
+/// beyond both ends, in `step_deg` steps, position fixed (a robot turning in place). `None`
+/// when there are fewer than `reacquire_min_points` points, under `reacquire_min_overlap`
+/// of them on occupied cells at the best heading, or it does not beat the dead-reckoned
+/// heading by `min_gain_share`; ties go to the smaller correction.
+pub fn align_over_arc(
+    grid: &OccupancyGrid,
+    pose: &DeadReckonedPose,
+    points: &[(f64, f64)],
+    cfg: &ScanMatchConfig,
+    turned_rad: f64,
+) -> Option<PoseCorrection> {
+    let enough = cfg.min_points.max(cfg.reacquire_min_points) as usize;
+    if !cfg.enabled || points.len() < enough || cfg.step_deg <= 0.0 {
+        return None;
+    }
+    let (base, _) = score(grid, pose, points);
+    // Offsets from the current heading, in the direction back toward the turn's start; a
+    // turn past half a circle leaves every heading possible.
+    let back = -turned_rad.signum();
+    let span_deg = turned_rad.abs().to_degrees().min(180.0);
+    let steps = ((span_deg + cfg.search_deg) / cfg.step_deg).ceil() as i64;
+    let beyond = (cfg.search_deg / cfg.step_deg).floor() as i64;
+    let mut best: Option<(f64, usize, f64)> = None;
+    for k in -beyond..=steps {
+        let dth = back * (k as f64 * cfg.step_deg).to_radians();
+        let cand = DeadReckonedPose {
+            heading_rad: pose.heading_rad + dth,
+            ..*pose
+        };
+        let (s, on) = score(grid, &cand, points);
+        let better = match best {
+            None => true,
+            Some((bs, _, bt)) => s > bs + 1e-9 || ((s - bs).abs() <= 1e-9 && dth.abs() < bt.abs()),
+        };
+        if better {
+            best = Some((s, on, dth));
+        }
+    }
+    let (s, on, dth) = best?;
+    let overlap = on as f64 / points.len() as f64;
+    if overlap < cfg.reacquire_min_overlap || s <= base * (1.0 + cfg.min_gain_share) + 1e-9 {
+        return None;
+    }
+    Some(PoseCorrection {
+        dx_m: 0.0,
+        dy_m: 0.0,
         dheading_rad: dth,
         overlap,
     })
@@ -269,15 +325,22 @@ mod tests {
         scan
     }
 
-    #[test]
-    fn a_shifted_pose_is_pulled_back_onto_the_map() {
+    /// The grid after four looks at [`corner_scan`] from the origin, facing east, and the
+    /// scan's points in the robot's frame.
+    fn corner_seen_from_origin() -> (OccupancyGrid, Vec<(f64, f64)>) {
         let mut grid = OccupancyGrid::new(GridConfig::default());
-        let pose = DeadReckonedPose::default();
         for _ in 0..4 {
-            let pts = grid.scan_points(&pose, 0.2, &corner_scan());
+            let pts = grid.scan_points(&DeadReckonedPose::default(), 0.2, &corner_scan());
             grid.insert(&pts);
         }
         let points = grid.scan_hits_robot_frame(&corner_scan(), 0.2);
+        (grid, points)
+    }
+
+    #[test]
+    fn a_shifted_pose_is_pulled_back_onto_the_map() {
+        let (grid, points) = corner_seen_from_origin();
+        let pose = DeadReckonedPose::default();
         assert!(points.len() > 40, "{}", points.len());
         // Dead reckoning says 0.1 m further ahead than the robot is; a search in position
         // (off by default: docs/navigation.md) finds it.
@@ -295,6 +358,36 @@ mod tests {
         assert!(fix.overlap > 0.5);
         // At the true pose nothing beats it.
         assert_eq!(align(&grid, &pose, &points, &cfg), None);
+    }
+
+    #[test]
+    fn a_turn_held_while_blind_is_found_over_the_arc_turned() {
+        let (grid, points) = corner_seen_from_origin();
+        let pose = DeadReckonedPose::default();
+        let cfg = ScanMatchConfig::default();
+        // Dead reckoning turned 50 degrees left; the robot did not move.
+        let turned = 50f64.to_radians();
+        let believed = DeadReckonedPose {
+            heading_rad: turned,
+            ..pose
+        };
+        // The frame-to-frame search cannot reach it.
+        assert_eq!(align(&grid, &believed, &points, &cfg), None);
+        let fix = align_over_arc(&grid, &believed, &points, &cfg, turned).expect("a fix");
+        assert!(
+            (fix.dheading_rad + turned).abs() <= cfg.step_deg.to_radians() + 1e-9,
+            "{fix:?}"
+        );
+        assert_eq!((fix.dx_m, fix.dy_m), (0.0, 0.0));
+        // Searched only back along the turn: dead reckoning that turned left from -100 to
+        // -50 degrees is not moved on past where it stands.
+        let other = DeadReckonedPose {
+            heading_rad: -turned,
+            ..pose
+        };
+        assert_eq!(align_over_arc(&grid, &other, &points, &cfg, turned), None);
+        // A turn that happened: nothing beats the dead-reckoned heading.
+        assert_eq!(align_over_arc(&grid, &pose, &points, &cfg, turned), None);
     }
 
     /// Repeats the position refinement from `start` (as the explorer does, once a frame) and

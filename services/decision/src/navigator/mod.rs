@@ -346,7 +346,7 @@ impl Navigator {
         if let Some(e) = &self.explorer {
             let s = e.status();
             return format!(
-                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}",
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}{}",
                 e.goal_m()
                     .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
                 s.plans,
@@ -357,6 +357,11 @@ impl Navigator {
                 s.position_fixes,
                 s.stalls,
                 s.tight_plans,
+                if s.reacquired > 0 {
+                    format!(" reacquired {}", s.reacquired)
+                } else {
+                    String::new()
+                },
                 if e.recovering() { " recovering" } else { "" },
                 if s.done { " done" } else { "" },
             );

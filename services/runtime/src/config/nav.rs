@@ -172,6 +172,19 @@ pub struct ScanMatchConfig {
     /// A patch is a wall, with a direction, when its spread across is under this share of
     /// its spread along (the eigenvalues of its cells' covariance).
     pub max_flatness: f64,
+    /// After the scan had too few points to align (`min_points`: a wall inside the
+    /// matcher's blind range) while dead reckoning turned at least this far, degrees, the
+    /// first scan that can be aligned again searches the heading over the whole arc turned
+    /// (and `search_deg` beyond each end) and the best fit is taken in full: a turn held by
+    /// an unseen wall while the camera was blind turns dead reckoning alone (measured: 48
+    /// to 140 degrees). 0 turns it off.
+    pub reacquire_turn_deg: f64,
+    /// Scan points a re-found heading needs (the search is wide, and over 20 generated
+    /// mazes the scans with fewer points found most of the wrong headings); scans with
+    /// fewer keep the arc open for the next one.
+    pub reacquire_min_points: u32,
+    /// Share of the points that must land on occupied cells at a re-found heading.
+    pub reacquire_min_overlap: f64,
 }
 
 impl Default for ScanMatchConfig {
@@ -194,6 +207,9 @@ impl Default for ScanMatchConfig {
             wall_patch_m: 0.25,
             huber_m: 0.1,
             max_flatness: 0.3,
+            reacquire_turn_deg: 0.0,
+            reacquire_min_points: 24,
+            reacquire_min_overlap: 0.75,
         }
     }
 }
@@ -229,6 +245,19 @@ impl ScanMatchConfig {
                 ("search_m", self.search_m, 0.0, 1.0),
                 ("step_m", self.step_m, 0.005, 0.5),
                 ("search_deg", self.search_deg, 0.0, 30.0),
+                ("reacquire_turn_deg", self.reacquire_turn_deg, 0.0, 360.0),
+                (
+                    "reacquire_min_points",
+                    f64::from(self.reacquire_min_points),
+                    1.0,
+                    64.0,
+                ),
+                (
+                    "reacquire_min_overlap",
+                    self.reacquire_min_overlap,
+                    0.0,
+                    1.0,
+                ),
                 ("step_deg", self.step_deg, 0.1, 10.0),
                 ("min_points", f64::from(self.min_points), 1.0, 64.0),
                 ("min_overlap", self.min_overlap, 0.0, 1.0),
