@@ -340,6 +340,18 @@ impl Controller {
         }
         if error.abs() > self.cfg.turn_above_deg.to_radians() {
             let left = error > 0.0;
+            if self.cfg.turn_front_min_m > 0.0
+                && input.front_m.is_some_and(|m| m < self.cfg.turn_front_min_m)
+                && self.shifts < self.cfg.max_shifts
+                && self
+                    .footprint
+                    .behind_clear(grid, &pose, self.cfg.shift_check_m)
+            {
+                // Too near the front to see it: back off until the camera sees what the
+                // turn will sweep past.
+                self.shifts += 1;
+                return out(MotionCommand::Reverse, false);
+            }
             let blocked = self.footprint.turn_blocked(grid, &pose, left);
             if let Some(ahead) = blocked
                 && self.shifts < self.cfg.max_shifts
@@ -504,6 +516,36 @@ mod tests {
                 .command,
             MotionCommand::Right
         );
+    }
+
+    #[test]
+    fn a_turn_with_the_front_too_near_to_see_backs_up_first_when_asked() {
+        let grid = open_grid();
+        let left = [(0.0, 0.0), (0.0, 1.0)];
+        let mut blind = input(DeadReckonedPose::default(), &left);
+        blind.front_m = Some(0.0);
+        // Off (the default): the turn begins at once.
+        let mut c = default_controller();
+        assert_eq!(c.step(&grid, blind).command, MotionCommand::Left);
+        let cfg = ControllerConfig {
+            turn_front_min_m: 0.5,
+            ..ControllerConfig::default()
+        };
+        let mut c = Controller::new(cfg, &RobotConfig::default(), &PulseTable::default());
+        // On: back up while the front stays near, at most max_shifts frames, then turn.
+        for _ in 0..cfg.max_shifts {
+            assert_eq!(c.step(&grid, blind).command, MotionCommand::Reverse);
+        }
+        assert_eq!(c.step(&grid, blind).command, MotionCommand::Left);
+        // A front seen far enough: no backing up.
+        let mut c = Controller::new(cfg, &RobotConfig::default(), &PulseTable::default());
+        let mut seen = blind;
+        seen.front_m = Some(0.8);
+        assert_eq!(c.step(&grid, seen).command, MotionCommand::Left);
+        // Nothing known behind: no backing up either.
+        let unseen = OccupancyGrid::new(GridConfig::default());
+        let mut c = Controller::new(cfg, &RobotConfig::default(), &PulseTable::default());
+        assert_ne!(c.step(&unseen, blind).command, MotionCommand::Reverse);
     }
 
     #[test]

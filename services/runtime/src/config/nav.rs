@@ -484,6 +484,12 @@ pub struct ControllerConfig {
     /// A scan with fewer valid bins than this, and no front range, counts as a wall ahead
     /// (and the frontiers in the blind zone cost `frontier.blind_cost_m` more).
     pub blind_scan_bins: u32,
+    /// A turn in place with the front nearer than this (the middle window's range, or its
+    /// memory; a blind scan reads 0) backs up first, in shifts, while the way behind is
+    /// clear: a turn made blind can be held by a wall the camera never saw, and dead
+    /// reckoning then turns alone (docs/navigation.md, second round of 2026-12-07), metres.
+    /// 0 turns it off.
+    pub turn_front_min_m: f64,
 }
 
 impl Default for ControllerConfig {
@@ -503,6 +509,7 @@ impl Default for ControllerConfig {
             shift_check_m: 0.1,
             front_memory_turn_rad: 0.26,
             blind_scan_bins: 4,
+            turn_front_min_m: 0.0,
         }
     }
 }
@@ -541,6 +548,7 @@ impl ControllerConfig {
                     0.0,
                     64.0,
                 ),
+                ("turn_front_min_m", self.turn_front_min_m, 0.0, 2.0),
             ],
         )?;
         if self.aligned_deg >= self.turn_above_deg {
