@@ -340,24 +340,15 @@ impl Controller {
         }
         if error.abs() > self.cfg.turn_above_deg.to_radians() {
             let left = error > 0.0;
-            if self.cfg.turn_front_min_m > 0.0
-                && input.front_m.is_some_and(|m| m < self.cfg.turn_front_min_m)
-                && self.shifts < self.cfg.max_shifts
-                && self
-                    .footprint
-                    .behind_clear(grid, &pose, self.cfg.shift_check_m)
-            {
-                // Too near the front to see it: back off until the camera sees what the
-                // turn will sweep past.
-                self.shifts += 1;
-                return out(MotionCommand::Reverse, false);
-            }
             let blocked = self.footprint.turn_blocked(grid, &pose, left);
-            if let Some(ahead) = blocked
-                && self.shifts < self.cfg.max_shifts
-            {
-                // Something in the turning disc: move away from it first.
-                if ahead
+            // Too near the front to see it (`turn_front_min_m`): back off first, as from a
+            // wall ahead in the disc, until the camera sees what the turn will sweep past.
+            let front_near = self.cfg.turn_front_min_m > 0.0
+                && input.front_m.is_some_and(|m| m < self.cfg.turn_front_min_m);
+            if (blocked.is_some() || front_near) && self.shifts < self.cfg.max_shifts {
+                // Something in the turning disc (or a front too near): move away from it
+                // first.
+                if (front_near || blocked == Some(true))
                     && self
                         .footprint
                         .behind_clear(grid, &pose, self.cfg.shift_check_m)
@@ -365,7 +356,7 @@ impl Controller {
                     self.shifts += 1;
                     return out(MotionCommand::Reverse, false);
                 }
-                if !ahead
+                if blocked == Some(false)
                     && self.may_drive_ahead(grid, &pose, self.cfg.shift_check_m, input.front_m)
                 {
                     self.shifts += 1;

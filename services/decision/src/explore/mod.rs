@@ -292,37 +292,24 @@ impl Explorer {
                 overlap: 0.0,
             });
         }
-        let points: Vec<(f64, f64)> = self.grid.scan_hits_robot_frame(scan, self.camera_forward_m);
-        let cfg = &self.cfg.scan_match;
-        let alignable = points.len() >= cfg.min_points as usize;
-        // The turn dead reckoning made since the scan last had points enough to align.
-        self.unaligned = match self.unaligned {
-            Some((last, turned)) => {
-                Some((pose.heading_rad, turned + wrap_rad(pose.heading_rad - last)))
-            }
-            None if !alignable => Some((pose.heading_rad, 0.0)),
-            None => None,
-        };
+        // With the heading search after blind turns on, every scan counts toward the arc;
+        // otherwise the points are wanted only past the checks below.
+        let early = (self.cfg.scan_match.reacquire_turn_deg > 0.0)
+            .then(|| self.grid.scan_hits_robot_frame(scan, self.camera_forward_m));
+        if let Some(points) = &early {
+            self.track_unaligned(pose, points.len());
+        }
         // Early scans would be aligned to themselves; a scan taken while turning fast is
         // placed by a heading that leads the camera's, and is not added to the grid either.
         if self.status.plans < 3 || !self.scan_placeable(turn_rate_rad_s) {
             return None;
         }
-        // The arc stays open until a scan has points enough for the wide search.
-        let enough = points.len() >= cfg.min_points.max(cfg.reacquire_min_points) as usize;
-        if enough && let Some((_, turned)) = self.unaligned.take() {
-            let reacquire_rad = cfg.reacquire_turn_deg.to_radians();
-            if reacquire_rad > 0.0
-                && turned.abs() >= reacquire_rad
-                && let Some(fix) =
-                    scan_match::align_over_arc(&self.grid, pose, &points, cfg, turned)
-            {
-                self.status.reacquired += 1;
-                self.status.scan_fixes += 1;
-                self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);
-                return Some(fix);
-            }
+        let points =
+            early.unwrap_or_else(|| self.grid.scan_hits_robot_frame(scan, self.camera_forward_m));
+        if let Some(fix) = self.reacquire(pose, &points) {
+            return Some(fix);
         }
+        let cfg = &self.cfg.scan_match;
         let g = cfg.gain;
         let searched =
             scan_match::align(&self.grid, pose, &points, cfg).map(|fix| PoseCorrection {
@@ -347,6 +334,42 @@ impl Explorer {
         if searched.is_none() && refined.is_none() {
             return None;
         }
+        self.status.scan_fixes += 1;
+        self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);
+        Some(fix)
+    }
+
+    /// Sums the turn dead reckoning makes from a scan with fewer than `min_points` points
+    /// (`points` this frame) until [`Explorer::reacquire`] closes the arc.
+    fn track_unaligned(&mut self, pose: &DeadReckonedPose, points: usize) {
+        let alignable = points >= self.cfg.scan_match.min_points as usize;
+        self.unaligned = match self.unaligned {
+            Some((last, turned)) => {
+                Some((pose.heading_rad, turned + wrap_rad(pose.heading_rad - last)))
+            }
+            None if !alignable => Some((pose.heading_rad, 0.0)),
+            None => None,
+        };
+    }
+
+    /// The heading searched over the arc turned since the scan last had points enough to
+    /// align, once this frame's `points` are enough for the wide search (fewer keep the
+    /// arc open) and the arc is at least `reacquire_turn_deg`.
+    fn reacquire(
+        &mut self,
+        pose: &DeadReckonedPose,
+        points: &[(f64, f64)],
+    ) -> Option<PoseCorrection> {
+        let cfg = &self.cfg.scan_match;
+        if points.len() < cfg.reacquire_points() {
+            return None;
+        }
+        let (_, turned) = self.unaligned.take()?;
+        if turned.abs() < cfg.reacquire_turn_deg.to_radians() {
+            return None;
+        }
+        let fix = scan_match::align_over_arc(&self.grid, pose, points, cfg, turned)?;
+        self.status.reacquired += 1;
         self.status.scan_fixes += 1;
         self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);
         Some(fix)

@@ -44,6 +44,52 @@ fn score(grid: &OccupancyGrid, pose: &DeadReckonedPose, points: &[(f64, f64)]) -
     (s, on)
 }
 
+/// The candidate correction `(dx_m, dy_m, dheading_rad)` at which `points` (robot frame,
+/// metres) score best on the grid, ties going to the smaller correction; `None` unless at
+/// least `min_overlap` of the points land on occupied cells there and it beats the
+/// uncorrected pose by `min_gain_share` (among near-equal fits the noise picks one, and
+/// following it would walk the pose at random).
+fn best_fit(
+    grid: &OccupancyGrid,
+    pose: &DeadReckonedPose,
+    points: &[(f64, f64)],
+    candidates: impl IntoIterator<Item = (f64, f64, f64)>,
+    min_overlap: f64,
+    min_gain_share: f64,
+) -> Option<PoseCorrection> {
+    let (base, _) = score(grid, pose, points);
+    let mut best: Option<(f64, usize, f64, f64, f64)> = None;
+    for (dx, dy, dth) in candidates {
+        let cand = DeadReckonedPose {
+            x_m: pose.x_m + dx,
+            y_m: pose.y_m + dy,
+            heading_rad: pose.heading_rad + dth,
+        };
+        let (s, on) = score(grid, &cand, points);
+        let size = dx.hypot(dy) + 0.1 * dth.abs();
+        let better = match best {
+            None => true,
+            Some((bs, _, bx, by, bt)) => {
+                s > bs + 1e-9 || ((s - bs).abs() <= 1e-9 && size < bx.hypot(by) + 0.1 * bt.abs())
+            }
+        };
+        if better {
+            best = Some((s, on, dx, dy, dth));
+        }
+    }
+    let (s, on, dx, dy, dth) = best?;
+    let overlap = on as f64 / points.len() as f64;
+    if overlap < min_overlap || s <= base * (1.0 + min_gain_share) + 1e-9 {
+        return None;
+    }
+    Some(PoseCorrection {
+        dx_m: dx,
+        dy_m: dy,
+        dheading_rad: dth,
+        overlap,
+    })
+}
+
 /// Searches for the pose that best explains `points` (robot frame, metres); `None` when there
 /// are too few points, too little overlap, or no pose beats the dead-reckoned one.
 pub fn align(
@@ -55,58 +101,31 @@ pub fn align(
     if !cfg.enabled || points.len() < cfg.min_points as usize {
         return None;
     }
-    let (base, _) = score(grid, pose, points);
     let nxy = (cfg.search_m / cfg.step_m).floor() as i64;
     let nth = (cfg.search_deg / cfg.step_deg).floor() as i64;
-    let mut best: Option<(f64, usize, f64, f64, f64)> = None;
-    for it in -nth..=nth {
+    let candidates = (-nth..=nth).flat_map(|it| {
         let dth = (it as f64 * cfg.step_deg).to_radians();
-        for ix in -nxy..=nxy {
-            for iy in -nxy..=nxy {
-                let (dx, dy) = (ix as f64 * cfg.step_m, iy as f64 * cfg.step_m);
-                let cand = DeadReckonedPose {
-                    x_m: pose.x_m + dx,
-                    y_m: pose.y_m + dy,
-                    heading_rad: pose.heading_rad + dth,
-                };
-                let (s, on) = score(grid, &cand, points);
-                // Ties go to the smaller correction.
-                let size = dx.hypot(dy) + 0.1 * dth.abs();
-                let better = match best {
-                    None => true,
-                    Some((bs, _, bx, by, bt)) => {
-                        s > bs + 1e-9
-                            || ((s - bs).abs() <= 1e-9 && size < bx.hypot(by) + 0.1 * bt.abs())
-                    }
-                };
-                if better {
-                    best = Some((s, on, dx, dy, dth));
-                }
-            }
-        }
-    }
-    let (s, on, dx, dy, dth) = best?;
-    let overlap = on as f64 / points.len() as f64;
-    // A better fit must be clearly better: among near-equal fits the noise picks one, and
-    // following it would walk the pose at random.
-    if overlap < cfg.min_overlap || s <= base * (1.0 + cfg.min_gain_share) + 1e-9 {
-        return None;
-    }
-    Some(PoseCorrection {
-        dx_m: dx,
-        dy_m: dy,
-        dheading_rad: dth,
-        overlap,
-    })
+        (-nxy..=nxy).flat_map(move |ix| {
+            (-nxy..=nxy).map(move |iy| (ix as f64 * cfg.step_m, iy as f64 * cfg.step_m, dth))
+        })
+    });
+    best_fit(
+        grid,
+        pose,
+        points,
+        candidates,
+        cfg.min_overlap,
+        cfg.min_gain_share,
+    )
 }
 
 /// The heading re-found after a blind turn: `points` (robot frame, metres) scored at every
 /// heading from `pose`'s back to where dead reckoning says the turn began (`turned_rad`
 /// before it; the true heading lies in between when the turn was held) and `search_deg`
 /// beyond both ends, in `step_deg` steps, position fixed (a robot turning in place). `None`
-/// when there are fewer than `reacquire_min_points` points, under `reacquire_min_overlap`
-/// of them on occupied cells at the best heading, or it does not beat the dead-reckoned
-/// heading by `min_gain_share`; ties go to the smaller correction.
+/// when there are fewer than [`ScanMatchConfig::reacquire_points`] points, under
+/// `reacquire_min_overlap` of them on occupied cells at the best heading, or it does not
+/// beat the dead-reckoned heading by `min_gain_share`; ties go to the smaller correction.
 pub fn align_over_arc(
     grid: &OccupancyGrid,
     pose: &DeadReckonedPose,
@@ -114,44 +133,25 @@ pub fn align_over_arc(
     cfg: &ScanMatchConfig,
     turned_rad: f64,
 ) -> Option<PoseCorrection> {
-    let enough = cfg.min_points.max(cfg.reacquire_min_points) as usize;
-    if !cfg.enabled || points.len() < enough || cfg.step_deg <= 0.0 {
+    if !cfg.enabled || points.len() < cfg.reacquire_points() || cfg.step_deg <= 0.0 {
         return None;
     }
-    let (base, _) = score(grid, pose, points);
     // Offsets from the current heading, in the direction back toward the turn's start; a
     // turn past half a circle leaves every heading possible.
     let back = -turned_rad.signum();
     let span_deg = turned_rad.abs().to_degrees().min(180.0);
     let steps = ((span_deg + cfg.search_deg) / cfg.step_deg).ceil() as i64;
     let beyond = (cfg.search_deg / cfg.step_deg).floor() as i64;
-    let mut best: Option<(f64, usize, f64)> = None;
-    for k in -beyond..=steps {
-        let dth = back * (k as f64 * cfg.step_deg).to_radians();
-        let cand = DeadReckonedPose {
-            heading_rad: pose.heading_rad + dth,
-            ..*pose
-        };
-        let (s, on) = score(grid, &cand, points);
-        let better = match best {
-            None => true,
-            Some((bs, _, bt)) => s > bs + 1e-9 || ((s - bs).abs() <= 1e-9 && dth.abs() < bt.abs()),
-        };
-        if better {
-            best = Some((s, on, dth));
-        }
-    }
-    let (s, on, dth) = best?;
-    let overlap = on as f64 / points.len() as f64;
-    if overlap < cfg.reacquire_min_overlap || s <= base * (1.0 + cfg.min_gain_share) + 1e-9 {
-        return None;
-    }
-    Some(PoseCorrection {
-        dx_m: 0.0,
-        dy_m: 0.0,
-        dheading_rad: dth,
-        overlap,
-    })
+    let candidates =
+        (-beyond..=steps).map(|k| (0.0, 0.0, back * (k as f64 * cfg.step_deg).to_radians()));
+    best_fit(
+        grid,
+        pose,
+        points,
+        candidates,
+        cfg.reacquire_min_overlap,
+        cfg.min_gain_share,
+    )
 }
 
 /// The wall near `q`: the centroid of the occupied cells within `wall_patch_m` of the

@@ -218,6 +218,12 @@ impl Default for ScanMatchConfig {
 const MAX_MATCH_POSES: f64 = 20_000.0;
 
 impl ScanMatchConfig {
+    /// Scan points a re-found heading needs: `reacquire_min_points`, and never fewer than
+    /// any alignment needs (`min_points`).
+    pub fn reacquire_points(&self) -> usize {
+        self.min_points.max(self.reacquire_min_points) as usize
+    }
+
     fn validate(&self) -> Result<(), Invalid> {
         self.check_ranges()?;
         let xy = 2.0 * (self.search_m / self.step_m).floor() + 1.0;
