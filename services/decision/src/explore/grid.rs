@@ -83,6 +83,32 @@ impl OccupancyGrid {
         }
     }
 
+    /// Makes this grid a copy of `other`, reusing this one's memory and copying only the
+    /// cells either grid ever updated (outside them both hold the initial values). A
+    /// fresh copy of the whole default grid (600 x 600 cells) measured 1-12 ms a frame,
+    /// its pages faulted in one by one.
+    pub fn copy_from(&mut self, other: &OccupancyGrid) {
+        if self.side != other.side {
+            *self = other.clone();
+            return;
+        }
+        let union = match (self.bounds, other.bounds) {
+            (Some(a), Some(b)) => Some((a.0.min(b.0), a.1.max(b.1), a.2.min(b.2), a.3.max(b.3))),
+            (a, b) => a.or(b),
+        };
+        if let Some((c0, c1, r0, r1)) = union {
+            for r in r0..=r1 {
+                let row = r * self.side;
+                let cells = row + c0..=row + c1;
+                self.log_odds[cells.clone()].copy_from_slice(&other.log_odds[cells.clone()]);
+                self.hits[cells.clone()].copy_from_slice(&other.hits[cells]);
+            }
+        }
+        self.cfg = other.cfg;
+        self.bounds = other.bounds;
+        self.first_bin = other.first_bin;
+    }
+
     /// Leaves out the scan's leftmost `bin` bins: a left-image pixel closer to the image's
     /// left edge than the matcher's largest disparity can only try the disparities whose
     /// match fits in the right image, so those columns read far walls where there are near
@@ -272,11 +298,14 @@ impl OccupancyGrid {
     /// Adds one scan's points and rays.
     pub fn insert(&mut self, points: &ScanPoints) {
         let step = 0.5 * self.cfg.cell_m;
-        let hit_cells: Vec<CellIndex> = points
+        let mut hit_cells: Vec<CellIndex> = points
             .hits
             .iter()
             .filter_map(|&(x, y)| self.cell_of(x, y))
             .collect();
+        // Sorted once: every ray sample asks whether its cell holds a point.
+        hit_cells.sort_unstable();
+        hit_cells.dedup();
         let mut touched: Vec<CellIndex> = Vec::with_capacity(512);
         for &(dir, free_m) in &points.rays {
             let mut r = 0.0;
@@ -287,7 +316,7 @@ impl OccupancyGrid {
                 let Some(cell) = self.cell_of(p.0, p.1) else {
                     break;
                 };
-                if Some(cell) == last || hit_cells.contains(&cell) {
+                if Some(cell) == last || hit_cells.binary_search(&cell).is_ok() {
                     continue;
                 }
                 last = Some(cell);
@@ -308,9 +337,6 @@ impl OccupancyGrid {
             };
             self.update(cell, delta);
         }
-        let mut hit_cells = hit_cells;
-        hit_cells.sort_unstable();
-        hit_cells.dedup();
         for cell in hit_cells {
             self.update(cell, self.cfg.hit_log_odds);
             let i = cell.1 * self.side + cell.0;
@@ -500,6 +526,25 @@ mod tests {
         assert_eq!(grid.state_at(0.05, 0.0), CellState::Occupied);
         assert_eq!(grid.state_at(0.05, 0.5), CellState::Occupied);
         assert_eq!(grid.state_at(0.4, 0.0), CellState::Unknown);
+    }
+
+    #[test]
+    fn a_copy_into_a_used_grid_equals_the_original_everywhere() {
+        let mut a = OccupancyGrid::new(GridConfig::default());
+        let mut b = OccupancyGrid::new(GridConfig::default());
+        let here = DeadReckonedPose::default();
+        let far = DeadReckonedPose {
+            x_m: 5.0,
+            y_m: -4.0,
+            heading_rad: 1.0,
+        };
+        a.mark_bump(&here, (0.5, 0.8), (-0.3, 0.3));
+        // b was used elsewhere: its cells there must not survive the copy.
+        b.mark_bump(&far, (0.5, 0.8), (-0.3, 0.3));
+        b.copy_from(&a);
+        assert_eq!(b.log_odds, a.log_odds);
+        assert_eq!(b.hits, a.hits);
+        assert_eq!(b.bounds(), a.bounds());
     }
 
     #[test]

@@ -15,6 +15,9 @@
 //!                   recovery ◄── progress ── controller ──► motion command
 //! ```
 //!
+//! Beside them, `stall` puts back a pose the picture says never moved, and `redraw` re-draws
+//! the grid from corrected poses after a heading lost in a blind turn is found.
+//!
 //! Each layer is its own file and its own piece of `[nav]`; this file only sequences them per
 //! frame. The wall memberships and intersection types are still computed by the navigator
 //! (perception); a change of intersection type makes the explorer plan again at once.
@@ -25,6 +28,7 @@ pub mod frontier;
 pub mod grid;
 pub mod planner;
 pub mod recovery;
+pub mod redraw;
 pub mod scan_match;
 pub mod stall;
 
@@ -39,6 +43,7 @@ use frontier::{Blacklist, choose, find_frontiers, frontier_cells};
 use grid::OccupancyGrid;
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
+use redraw::{GridEdit, RedrawLog, RedrawStep};
 pub use scan_match::PoseCorrection;
 use stall::StallCheck;
 
@@ -82,6 +87,8 @@ pub struct ExploreStatus {
     /// Headings re-found over the arc turned while the scan could not be aligned
     /// (`[nav.scan_match] reacquire_turn_deg`).
     pub reacquired: u64,
+    /// Grids re-drawn after a blind turn's heading was corrected (`[nav.redraw]`).
+    pub redraws: u64,
     /// Plans that found a frontier only with `[nav.costmap] fallback_clearance_m`.
     pub tight_plans: u64,
     /// No reachable frontier is left.
@@ -191,6 +198,10 @@ pub struct Explorer {
     /// Dead reckoning's heading at the last frame and the turn it made since the scan last
     /// had points enough to align (`None`: this frame's scan had).
     unaligned: Option<(f64, f64)>,
+    /// The grid's edits since a blind turn began, to re-draw if its heading is corrected.
+    redraw: Option<RedrawLog>,
+    /// A grid's memory to take the next log's copy in (`None` with re-drawing off).
+    spare: Option<OccupancyGrid>,
     /// The last command sent.
     last_command: MotionCommand,
     status: ExploreStatus,
@@ -204,9 +215,16 @@ impl Explorer {
         pulses: &PulseTable,
         camera_forward_m: f64,
     ) -> Self {
+        let grid = OccupancyGrid::new(cfg.grid);
+        // Written through once here, so that the first copy into it touches no fresh page.
+        let spare = (cfg.redraw.blind_turn_deg > 0.0).then(|| {
+            let mut spare = OccupancyGrid::new(cfg.grid);
+            spare.copy_from(&grid);
+            spare
+        });
         Self {
             cfg,
-            grid: OccupancyGrid::new(cfg.grid),
+            grid,
             controller: Controller::new(cfg.controller, robot, pulses),
             camera_forward_m,
             blacklist: Blacklist::default(),
@@ -227,6 +245,8 @@ impl Explorer {
             last_turn_stall_m: None,
             stalled: false,
             unaligned: None,
+            redraw: None,
+            spare,
             last_command: MotionCommand::Stop,
             status: ExploreStatus::default(),
         }
@@ -279,6 +299,7 @@ impl Explorer {
         pose: &DeadReckonedPose,
         scan: &ObstacleScan,
         turn_rate_rad_s: f64,
+        now_ns: u64,
     ) -> Option<PoseCorrection> {
         if let Some(back) = self.stall.update(scan, pose) {
             // Pinned: what dead reckoning integrated since the picture last changed never
@@ -292,12 +313,18 @@ impl Explorer {
                 overlap: 0.0,
             });
         }
-        // With the heading search after blind turns on, every scan counts toward the arc;
-        // otherwise the points are wanted only past the checks below.
-        let early = (self.cfg.scan_match.reacquire_turn_deg > 0.0)
+        // With the heading search or the re-drawing after blind turns on, every scan counts
+        // toward the arc; otherwise the points are wanted only past the checks below.
+        let reacquiring = self.cfg.scan_match.reacquire_turn_deg > 0.0;
+        let early = (reacquiring || self.cfg.redraw.blind_turn_deg > 0.0)
             .then(|| self.grid.scan_hits_robot_frame(scan, self.camera_forward_m));
         if let Some(points) = &early {
-            self.track_unaligned(pose, points.len());
+            if reacquiring {
+                self.track_unaligned(pose, points.len());
+            }
+            if let Some(fix) = self.redraw_step(pose, points.len(), now_ns) {
+                return Some(fix);
+            }
         }
         // Early scans would be aligned to themselves; a scan taken while turning fast is
         // placed by a heading that leads the camera's, and is not added to the grid either.
@@ -336,7 +363,68 @@ impl Explorer {
         }
         self.status.scan_fixes += 1;
         self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);
+        if let Some(log) = self.redraw.as_mut() {
+            log.corrected(fix.dheading_rad);
+        }
         Some(fix)
+    }
+
+    /// Opens, steps or closes the log of the grid's edits since a blind turn (`[nav.redraw]`;
+    /// `points` this frame's scan points); once it is re-drawn the copy becomes the grid and
+    /// the position correction that goes with it is returned.
+    fn redraw_step(
+        &mut self,
+        pose: &DeadReckonedPose,
+        points: usize,
+        now_ns: u64,
+    ) -> Option<PoseCorrection> {
+        if self.cfg.redraw.blind_turn_deg <= 0.0 {
+            return None;
+        }
+        let alignable = points >= self.cfg.scan_match.min_points as usize;
+        let Some(log) = self.redraw.as_mut() else {
+            if !alignable {
+                let spare = self.spare.take();
+                let log = RedrawLog::open(self.cfg.redraw, &self.grid, spare, pose, now_ns);
+                self.redraw = Some(log);
+            }
+            return None;
+        };
+        match log.step(pose, alignable, now_ns) {
+            RedrawStep::Keep => None,
+            RedrawStep::Drop => {
+                self.spare = self.redraw.take().map(RedrawLog::into_grid);
+                None
+            }
+            RedrawStep::Done {
+                dx_m,
+                dy_m,
+                dheading_rad,
+            } => {
+                let redrawn = self.redraw.take()?.into_grid();
+                self.spare = Some(std::mem::replace(&mut self.grid, redrawn));
+                self.status.redraws += 1;
+                // Everything remembered in the old frame goes with it.
+                self.drop_plan();
+                self.front = None;
+                self.last_turn_stall_m = None;
+                self.stall.shift(dx_m, dy_m, dheading_rad);
+                Some(PoseCorrection {
+                    dx_m,
+                    dy_m,
+                    dheading_rad,
+                    overlap: 0.0,
+                })
+            }
+        }
+    }
+
+    /// Makes an edit on the grid, and logs it while a blind turn's log is open.
+    fn edit(&mut self, edit: GridEdit) {
+        edit.apply(&mut self.grid);
+        if let Some(log) = self.redraw.as_mut() {
+            log.log(&edit);
+        }
     }
 
     /// Sums the turn dead reckoning makes from a scan with fewer than `min_points` points
@@ -382,6 +470,9 @@ impl Explorer {
     /// 18 degrees found a stall three times a second for 270 s).
     pub fn corrected(&mut self, dx_m: f64, dy_m: f64, dheading_rad: f64) {
         self.stall.shift(dx_m, dy_m, dheading_rad);
+        if let Some(log) = self.redraw.as_mut() {
+            log.corrected(dheading_rad);
+        }
     }
 
     /// Whether a scan taken at this turn rate can be placed on the grid: while turning fast
@@ -416,13 +507,21 @@ impl Explorer {
         }
         let fp = self.controller.footprint();
         let (half_length_m, half_width_m) = (fp.half_length_m(), fp.half_width_m());
-        self.grid
-            .clear_footprint(&pose, half_length_m, half_width_m);
+        self.edit(GridEdit::Footprint {
+            pose,
+            half_length_m,
+            half_width_m,
+        });
         if input.scan.valid_bins() > 0 && self.scan_placeable(input.turn_rate_rad_s) {
             let pts = self
                 .grid
                 .scan_points(&pose, self.camera_forward_m, input.scan);
-            self.grid.insert(&pts);
+            self.edit(GridEdit::Scan(pts));
+        }
+        if self.redraw.as_ref().is_some_and(RedrawLog::redrawing) {
+            // The grid is being re-drawn from corrected poses over a few frames: the one
+            // in use until then is the smeared one, so nothing is planned on it.
+            return MotionCommand::Stop;
         }
         if input.intersection != self.last_intersection {
             self.last_intersection = input.intersection;
@@ -447,12 +546,20 @@ impl Explorer {
             let stalled_left = match self.last_command {
                 MotionCommand::Forward => {
                     let a = l + self.cfg.recovery.bump_gap_m;
-                    self.grid.mark_bump(&pose, (a, a), (-w, w));
+                    self.edit(GridEdit::Bump {
+                        pose,
+                        ahead_m: (a, a),
+                        left_m: (-w, w),
+                    });
                     None
                 }
                 MotionCommand::Reverse => {
                     let a = -l - self.cfg.recovery.bump_gap_m;
-                    self.grid.mark_bump(&pose, (a, a), (-w, w));
+                    self.edit(GridEdit::Bump {
+                        pose,
+                        ahead_m: (a, a),
+                        left_m: (-w, w),
+                    });
                     None
                 }
                 // A turn in place is held mostly by the side its front corner swings
@@ -471,7 +578,11 @@ impl Explorer {
                         } else {
                             -w - self.cfg.recovery.turn_bump_gap_m
                         };
-                        self.grid.mark_bump(&pose, (0.0, l), (side, side));
+                        self.edit(GridEdit::Bump {
+                            pose,
+                            ahead_m: (0.0, l),
+                            left_m: (side, side),
+                        });
                     }
                     Some(left)
                 }

@@ -346,7 +346,7 @@ impl Navigator {
         if let Some(e) = &self.explorer {
             let s = e.status();
             return format!(
-                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}{}",
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}{}{}",
                 e.goal_m()
                     .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
                 s.plans,
@@ -359,6 +359,11 @@ impl Navigator {
                 s.tight_plans,
                 if s.reacquired > 0 {
                     format!(" reacquired {}", s.reacquired)
+                } else {
+                    String::new()
+                },
+                if s.redraws > 0 {
+                    format!(" redrawn {}", s.redraws)
                 } else {
                     String::new()
                 },
@@ -449,8 +454,12 @@ impl Navigator {
             }
         }
         if let Some(e) = self.explorer.as_mut()
-            && let Some(fix) =
-                e.correction(&self.odometry.pose(), scan, self.odometry.turn_rate_rad_s())
+            && let Some(fix) = e.correction(
+                &self.odometry.pose(),
+                scan,
+                self.odometry.turn_rate_rad_s(),
+                now_ns,
+            )
         {
             self.odometry.correct_position(fix.dx_m, fix.dy_m);
             self.odometry.correct_heading(fix.dheading_rad);
