@@ -219,7 +219,7 @@ impl Explorer {
         // Written through once here, so that the first copy into it touches no fresh page.
         let spare = (cfg.redraw.blind_turn_deg > 0.0).then(|| {
             let mut spare = OccupancyGrid::new(cfg.grid);
-            spare.copy_from(&grid);
+            spare.fault_in();
             spare
         });
         Self {
@@ -404,7 +404,10 @@ impl Explorer {
                 let redrawn = self.redraw.take()?.into_grid();
                 self.spare = Some(std::mem::replace(&mut self.grid, redrawn));
                 self.status.redraws += 1;
-                // Everything remembered in the old frame goes with it.
+                // What is remembered in the old frame and steers the next frames goes: the
+                // plan, the front memory, the last turn's stall; the blacklists, the
+                // progress checker and a running recovery keep their old-frame points
+                // (a few tenths of a metre off at most after seed 13's turn).
                 self.drop_plan();
                 self.front = None;
                 self.last_turn_stall_m = None;

@@ -296,7 +296,8 @@ enum Phase {
     /// Re-drawing the log on the copy: `next` edits done. The edits logged before the
     /// jump began (`from_edit`) turn by all of it; those logged during it by what of it
     /// they had not had yet (`corrected_rad` then less `base_rad`); those logged from now
-    /// on (at `frozen_rad`) are in the corrected heading and get only the position's turn.
+    /// on (at `frozen_rad`) are in the jump's heading and get the position's turn and the
+    /// difference between the turn found and the jump.
     Redrawing {
         redraw: Redraw,
         turn: RigidTurn,
@@ -489,10 +490,13 @@ impl RedrawLog {
                 // says the scans since the blind turn were drawn in the grid's frame, and the
                 // jump fixed drift (measured on generated maze 18: a 15-degree jump, the
                 // best turn 1 degree).
+                // And it must undo the blind turn too (with `search_deg` wider than the jump
+                // the search reaches the other side).
                 let gain = (score - still) as f64;
                 if decided < self.cfg.match_min_points as usize
                     || gain < self.cfg.match_min_gain_share * decided as f64
                     || turn_rad.abs() < self.cfg.min_correction_deg.to_radians()
+                    || turn_rad * *turned_rad >= 0.0
                 {
                     return RedrawStep::Drop;
                 }

@@ -768,7 +768,8 @@ pub struct RedrawConfig {
     pub match_max_scans: u32,
     /// The log is dropped this long after the turn began without a re-draw, seconds.
     pub window_s: f64,
-    /// Logged edits re-drawn per frame: the copy is re-drawn beside the live grid over
+    /// Logged edits re-drawn per frame (at least 8: a frame logs up to three, and the
+    /// re-drawing must catch up): the copy is re-drawn beside the live grid over
     /// several frames, the robot standing, and replaces it when done, so no frame pays for
     /// the whole log (measured: 8-20 us an edit, 1808 edits for 65 s).
     pub edits_per_frame: u32,
@@ -820,7 +821,7 @@ impl RedrawConfig {
                 (
                     "edits_per_frame",
                     f64::from(self.edits_per_frame),
-                    1.0,
+                    8.0,
                     100_000.0,
                 ),
             ],
