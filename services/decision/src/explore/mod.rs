@@ -43,7 +43,7 @@ use frontier::{Blacklist, choose, find_frontiers, frontier_cells};
 use grid::OccupancyGrid;
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
-use redraw::{GridEdit, RedrawLog, RedrawStep};
+use redraw::{BlindArc, GridEdit, RedrawLog, RedrawStep};
 pub use scan_match::PoseCorrection;
 use stall::StallCheck;
 
@@ -197,7 +197,7 @@ pub struct Explorer {
     stalled: bool,
     /// Dead reckoning's heading at the last frame and the turn it made since the scan last
     /// had points enough to align (`None`: this frame's scan had).
-    unaligned: Option<(f64, f64)>,
+    unaligned: Option<BlindArc>,
     /// The grid's edits since a blind turn began, to re-draw if its heading is corrected.
     redraw: Option<RedrawLog>,
     /// A grid's memory to take the next log's copy in (`None` with re-drawing off).
@@ -434,13 +434,13 @@ impl Explorer {
     /// (`points` this frame) until [`Explorer::reacquire`] closes the arc.
     fn track_unaligned(&mut self, pose: &DeadReckonedPose, points: usize) {
         let alignable = points >= self.cfg.scan_match.min_points as usize;
-        self.unaligned = match self.unaligned {
-            Some((last, turned)) => {
-                Some((pose.heading_rad, turned + wrap_rad(pose.heading_rad - last)))
+        match self.unaligned.as_mut() {
+            Some(arc) => {
+                arc.advance(pose.heading_rad);
             }
-            None if !alignable => Some((pose.heading_rad, 0.0)),
-            None => None,
-        };
+            None if !alignable => self.unaligned = Some(BlindArc::new(pose.heading_rad)),
+            None => {}
+        }
     }
 
     /// The heading searched over the arc turned since the scan last had points enough to
@@ -455,7 +455,7 @@ impl Explorer {
         if points.len() < cfg.reacquire_points() {
             return None;
         }
-        let (_, turned) = self.unaligned.take()?;
+        let turned = self.unaligned.take()?.turned_rad();
         if turned.abs() < cfg.reacquire_turn_deg.to_radians() {
             return None;
         }

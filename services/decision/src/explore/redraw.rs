@@ -283,14 +283,41 @@ impl RigidTurn {
     }
 }
 
+/// Dead reckoning's turn summed frame by frame while the scan is too empty to align (a
+/// blind turn): the log's arc here, the arc searched by `scan_match::align_over_arc`.
+#[derive(Debug, Clone, Copy)]
+pub struct BlindArc {
+    last_heading_rad: f64,
+    turned_rad: f64,
+}
+
+impl BlindArc {
+    /// An arc starting at `heading_rad`.
+    pub fn new(heading_rad: f64) -> Self {
+        Self {
+            last_heading_rad: heading_rad,
+            turned_rad: 0.0,
+        }
+    }
+
+    /// Adds the turn to `heading_rad` and returns the sum, radians.
+    pub fn advance(&mut self, heading_rad: f64) -> f64 {
+        self.turned_rad += wrap_rad(heading_rad - self.last_heading_rad);
+        self.last_heading_rad = heading_rad;
+        self.turned_rad
+    }
+
+    /// The sum so far, radians.
+    pub fn turned_rad(&self) -> f64 {
+        self.turned_rad
+    }
+}
+
 /// Where the log stands.
 #[derive(Debug, Clone)]
 enum Phase {
     /// The scan is too empty to align: dead reckoning's turn since is summed.
-    Blind {
-        turned_rad: f64,
-        last_heading_rad: f64,
-    },
+    Blind(BlindArc),
     /// The blind turn was large: a correction the other way is waited for.
     Waiting { turned_rad: f64 },
     /// Re-drawing the log on the copy: `next` edits done. The edits logged before the
@@ -372,10 +399,7 @@ impl RedrawLog {
             last_corrected_rad: 0.0,
             recent: VecDeque::new(),
             edits: EditLog::default(),
-            phase: Phase::Blind {
-                turned_rad: 0.0,
-                last_heading_rad: pose.heading_rad,
-            },
+            phase: Phase::Blind(BlindArc::new(pose.heading_rad)),
         }
     }
 
@@ -415,21 +439,15 @@ impl RedrawLog {
         self.recent
             .push_back((now_ns, self.corrected_rad, self.edits.len()));
         match &mut self.phase {
-            Phase::Blind {
-                turned_rad,
-                last_heading_rad,
-            } => {
-                *turned_rad += wrap_rad(pose.heading_rad - *last_heading_rad);
-                *last_heading_rad = pose.heading_rad;
+            Phase::Blind(arc) => {
+                let turned_rad = arc.advance(pose.heading_rad);
                 if !alignable {
                     return RedrawStep::Keep;
                 }
                 if turned_rad.abs() < self.cfg.blind_turn_deg.to_radians() {
                     return RedrawStep::Drop;
                 }
-                self.phase = Phase::Waiting {
-                    turned_rad: *turned_rad,
-                };
+                self.phase = Phase::Waiting { turned_rad };
                 RedrawStep::Keep
             }
             Phase::Waiting { turned_rad } => {
