@@ -144,7 +144,7 @@ impl EditLog {
     /// How well the logged scans' points, placed as a re-draw by `turn_rad` would place
     /// them, agree with `grid` (the copy taken before the blind turn): points on occupied
     /// cells less points on free ones, and the points on cells either way. At most
-    /// `max_scans` scans, spread over the log.
+    /// `max_scans` scans, spread over the log as it was when the search began.
     fn agreement(
         &self,
         redraw: &Redraw,
@@ -153,15 +153,14 @@ impl EditLog {
         max_scans: usize,
     ) -> (i64, usize) {
         let turn = RigidTurn::new(redraw.pivot_m, turn_rad);
-        let scans = self
-            .edits
+        let logged = &self.edits[..redraw.searched_edits.min(self.edits.len())];
+        let scans = logged
             .iter()
             .filter(|(_, e)| matches!(e, Logged::Scan { .. }))
             .count();
         let stride = scans.div_ceil(max_scans.max(1)).max(1);
         let (mut score, mut decided) = (0i64, 0usize);
-        let scan_edits = self
-            .edits
+        let scan_edits = logged
             .iter()
             .enumerate()
             .filter_map(|(i, (at, e))| match e {
@@ -247,6 +246,9 @@ struct Redraw {
     base_rad: f64,
     /// The first edit logged during the jump.
     from_edit: usize,
+    /// The edits the search scores: those logged before it began (the same scans for
+    /// every turn tried, over the frames the search takes).
+    searched_edits: usize,
 }
 
 impl Redraw {
@@ -320,6 +322,19 @@ enum Phase {
     Blind(BlindArc),
     /// The blind turn was large: a correction the other way is waited for.
     Waiting { turned_rad: f64 },
+    /// A jump the other way came: the turns about it are scored against the copy,
+    /// `turns_per_frame` a frame; `next` counts the turns scored (no turn first).
+    Searching {
+        turned_rad: f64,
+        redraw: Redraw,
+        /// The jump, radians.
+        jump_rad: f64,
+        /// No turn's agreement.
+        still: i64,
+        /// The best turn so far: agreement, points decided, turn.
+        best: Option<(i64, usize, f64)>,
+        next: usize,
+    },
     /// Re-drawing the log on the copy: `next` edits done. The edits logged before the
     /// jump began (`from_edit`) turn by all of it; those logged during it by what of it
     /// they had not had yet (`corrected_rad` then less `base_rad`); those logged from now
@@ -471,63 +486,22 @@ impl RedrawLog {
                 {
                     return RedrawStep::Keep;
                 }
-                let redraw = Redraw {
-                    pivot_m: self.pivot_m,
-                    base_rad,
-                    from_edit,
-                };
-                // The jump brings the heading to the building's axes; the turn that brings
-                // the scans since the blind turn onto the grid drawn before it is searched
-                // about it, and must fit that grid better than no turn at all (a blind
-                // turn that was made, followed by the fix of an older error, measured on
-                // generated maze 6, must not move the scans).
-                let max_scans = self.cfg.match_max_scans as usize;
-                let (still, _) = self.edits.agreement(&redraw, 0.0, &self.copy, max_scans);
-                let step = self.cfg.search_step_deg.to_radians();
-                let n = (self.cfg.search_deg / self.cfg.search_step_deg).floor() as i64;
-                let best = (-n..=n)
-                    .map(|k| {
-                        let turn_rad = c + k as f64 * step;
-                        let (score, decided) = self
-                            .edits
-                            .agreement(&redraw, turn_rad, &self.copy, max_scans);
-                        (score, decided, turn_rad)
-                    })
-                    .max_by_key(|&(score, ..)| score);
-                tracing::debug!(
-                    jump_deg = c.to_degrees(),
-                    edits = self.edits.len(),
-                    still_agreement = still,
-                    best = ?best.map(|(score, decided, rad)| (score, decided, rad.to_degrees())),
-                    "redraw: a heading jump after a blind turn, turns searched"
-                );
-                let Some((score, decided, turn_rad)) = best else {
-                    return RedrawStep::Drop;
-                };
-                // The turn found must be as large as the jump that asked for it: a small one
-                // says the scans since the blind turn were drawn in the grid's frame, and the
-                // jump fixed drift (measured on generated maze 18: a 15-degree jump, the
-                // best turn 1 degree).
-                // And it must undo the blind turn too (with `search_deg` wider than the jump
-                // the search reaches the other side).
-                let gain = (score - still) as f64;
-                if decided < self.cfg.match_min_points as usize
-                    || gain < self.cfg.match_min_gain_share * decided as f64
-                    || turn_rad.abs() < self.cfg.min_correction_deg.to_radians()
-                    || turn_rad * *turned_rad >= 0.0
-                {
-                    return RedrawStep::Drop;
-                }
-                self.phase = Phase::Redrawing {
-                    redraw,
-                    turn: RigidTurn::new(self.pivot_m, turn_rad),
-                    turn_rad,
-                    dheading_rad: turn_rad - c,
-                    frozen_rad: self.corrected_rad,
+                self.phase = Phase::Searching {
+                    turned_rad: *turned_rad,
+                    redraw: Redraw {
+                        pivot_m: self.pivot_m,
+                        base_rad,
+                        from_edit,
+                        searched_edits: self.edits.len(),
+                    },
+                    jump_rad: c,
+                    still: 0,
+                    best: None,
                     next: 0,
                 };
-                RedrawStep::Keep
+                self.search()
             }
+            Phase::Searching { .. } => self.search(),
             Phase::Redrawing {
                 redraw,
                 turn,
@@ -554,6 +528,89 @@ impl RedrawLog {
                 }
             }
         }
+    }
+
+    /// Scores up to `turns_per_frame` turns of the search; once all are scored, drops the
+    /// log or starts re-drawing it with the best.
+    fn search(&mut self) -> RedrawStep {
+        let Phase::Searching {
+            turned_rad,
+            redraw,
+            jump_rad,
+            still,
+            best,
+            next,
+        } = &mut self.phase
+        else {
+            return RedrawStep::Keep;
+        };
+        // The jump brings the heading to the building's axes; the turn that brings
+        // the scans since the blind turn onto the grid drawn before it is searched
+        // about it, and must fit that grid better than no turn at all (a blind
+        // turn that was made, followed by the fix of an older error, measured on
+        // generated maze 6, must not move the scans).
+        let max_scans = self.cfg.match_max_scans as usize;
+        let step = self.cfg.search_step_deg.to_radians();
+        let n = (self.cfg.search_deg / self.cfg.search_step_deg).floor() as usize;
+        let turns = 2 * n + 2;
+        for _ in 0..self.cfg.turns_per_frame {
+            if *next >= turns {
+                break;
+            }
+            if *next == 0 {
+                *still = self.edits.agreement(redraw, 0.0, &self.copy, max_scans).0;
+            } else {
+                let k = (*next - 1) as f64 - n as f64;
+                let turn_rad = *jump_rad + k * step;
+                let (score, decided) = self
+                    .edits
+                    .agreement(redraw, turn_rad, &self.copy, max_scans);
+                // The last of equal scores, as `max_by_key` takes.
+                if best.is_none_or(|(b, ..)| score >= b) {
+                    *best = Some((score, decided, turn_rad));
+                }
+            }
+            *next += 1;
+        }
+        if *next < turns {
+            return RedrawStep::Keep;
+        }
+        tracing::debug!(
+            jump_deg = jump_rad.to_degrees(),
+            edits = redraw.searched_edits,
+            still_agreement = *still,
+            best = ?best.map(|(score, decided, rad)| (score, decided, rad.to_degrees())),
+            "redraw: a heading jump after a blind turn, turns searched"
+        );
+        let Some((score, decided, turn_rad)) = *best else {
+            return RedrawStep::Drop;
+        };
+        // The turn found must be as large as the jump that asked for it: a small one
+        // says the scans since the blind turn were drawn in the grid's frame, and the
+        // jump fixed drift (measured on generated maze 18: a 15-degree jump, the
+        // best turn 1 degree).
+        // And it must undo the blind turn too (with `search_deg` wider than the jump
+        // the search reaches the other side).
+        let gain = (score - *still) as f64;
+        if decided < self.cfg.match_min_points as usize
+            || gain < self.cfg.match_min_gain_share * decided as f64
+            || turn_rad.abs() < self.cfg.min_correction_deg.to_radians()
+            || turn_rad * *turned_rad >= 0.0
+        {
+            return RedrawStep::Drop;
+        }
+        // The pose has had the corrections made since the jump began, those of the
+        // search's frames too.
+        let had_rad = self.corrected_rad - redraw.base_rad;
+        self.phase = Phase::Redrawing {
+            redraw: *redraw,
+            turn: RigidTurn::new(self.pivot_m, turn_rad),
+            turn_rad,
+            dheading_rad: turn_rad - had_rad,
+            frozen_rad: self.corrected_rad,
+            next: 0,
+        };
+        RedrawStep::Keep
     }
 
     /// The copy: re-drawn after [`RedrawStep::Done`], otherwise as it was taken (memory to
@@ -615,6 +672,7 @@ mod tests {
         RedrawConfig {
             blind_turn_deg: 30.0,
             edits_per_frame: 2,
+            turns_per_frame: 1000,
             ..RedrawConfig::default()
         }
     }
@@ -797,6 +855,60 @@ mod tests {
         assert_eq!(
             log.step(&pose(0.0, 0.0, 70.0), true, late),
             RedrawStep::Drop
+        );
+    }
+
+    /// The held turn of the first test with `cfg`: the frames from the settled jump to
+    /// the end of the re-drawing, the last step and the re-drawn copy.
+    fn held_turn_redrawn(cfg: RedrawConfig) -> (usize, RedrawStep, OccupancyGrid) {
+        let mut grid = OccupancyGrid::new(GridConfig::default());
+        let start = pose(0.0, 0.0, 0.0);
+        draw(&mut grid, None, &start, 1.0, 4);
+        let mut log = RedrawLog::open(cfg, &grid, None, &start, 0);
+        let mut now = 0;
+        for deg in [10.0, 20.0, 30.0, 40.0] {
+            now += FRAME_NS;
+            log.step(&pose(0.0, 0.0, deg), false, now);
+        }
+        let wrong = pose(0.0, 0.0, 40.0);
+        now += FRAME_NS;
+        log.step(&wrong, true, now);
+        draw(&mut grid, Some(&mut log), &wrong, 1.0, 4);
+        log.corrected(-40f64.to_radians());
+        now += FRAME_NS;
+        log.step(&wrong, true, now);
+        let here = pose(0.0, 0.0, 0.0);
+        for frames in 1..100 {
+            now += FRAME_NS;
+            let step = log.step(&here, true, now);
+            if step != RedrawStep::Keep {
+                return (frames, step, log.into_grid());
+            }
+        }
+        panic!("not re-drawn in 100 frames");
+    }
+
+    #[test]
+    fn a_search_spread_over_frames_finds_the_turn_found_in_one() {
+        let one = RedrawConfig {
+            turns_per_frame: 1000,
+            ..cfg()
+        };
+        let spread = RedrawConfig {
+            turns_per_frame: 3,
+            ..cfg()
+        };
+        let (frames_one, done_one, grid_one) = held_turn_redrawn(one);
+        let (frames_spread, done_spread, grid_spread) = held_turn_redrawn(spread);
+        assert!(matches!(done_one, RedrawStep::Done { .. }), "{done_one:?}");
+        assert_eq!(done_spread, done_one);
+        // 16 turns (no turn and 2 x 7 + 1 about the jump), 3 a frame: 5 more frames.
+        assert_eq!(frames_spread, frames_one + 5);
+        assert_eq!(grid_spread.hits_at(1.0, 0.0), grid_one.hits_at(1.0, 0.0));
+        let drawn = (40f64.to_radians().cos(), 40f64.to_radians().sin());
+        assert_eq!(
+            grid_spread.state_at(drawn.0, drawn.1),
+            grid_one.state_at(drawn.0, drawn.1)
         );
     }
 }
