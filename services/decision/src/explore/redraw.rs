@@ -334,6 +334,8 @@ enum Phase {
         /// The best turn so far: agreement, points decided, turn.
         best: Option<(i64, usize, f64)>,
         next: usize,
+        /// Time spent scoring so far (the debug log's `search_us`), nanoseconds.
+        spent_ns: u64,
     },
     /// Re-drawing the log on the copy: `next` edits done. The edits logged before the
     /// jump began (`from_edit`) turn by all of it; those logged during it by what of it
@@ -498,6 +500,7 @@ impl RedrawLog {
                     still: 0,
                     best: None,
                     next: 0,
+                    spent_ns: 0,
                 };
                 self.search()
             }
@@ -540,10 +543,12 @@ impl RedrawLog {
             still,
             best,
             next,
+            spent_ns,
         } = &mut self.phase
         else {
             return RedrawStep::Keep;
         };
+        let started = std::time::Instant::now();
         // The jump brings the heading to the building's axes; the turn that brings
         // the scans since the blind turn onto the grid drawn before it is searched
         // about it, and must fit that grid better than no turn at all (a blind
@@ -572,6 +577,7 @@ impl RedrawLog {
             }
             *next += 1;
         }
+        *spent_ns += u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
         if *next < turns {
             return RedrawStep::Keep;
         }
@@ -579,6 +585,8 @@ impl RedrawLog {
             jump_deg = jump_rad.to_degrees(),
             edits = redraw.searched_edits,
             still_agreement = *still,
+            turns,
+            search_us = *spent_ns / 1000,
             best = ?best.map(|(score, decided, rad)| (score, decided, rad.to_degrees())),
             "redraw: a heading jump after a blind turn, turns searched"
         );
