@@ -455,9 +455,15 @@ impl RedrawLog {
         }
         self.recent
             .push_back((now_ns, self.corrected_rad, self.edits.len()));
+        let elapsed_s = now_ns.saturating_sub(self.opened_ns) as f64 * 1e-9;
         match &mut self.phase {
             Phase::Blind(arc) => {
                 let turned_rad = arc.advance(pose.heading_rad);
+                // A scan that stays empty (the robot facing a wall, or blind in a dark
+                // room) must not grow the log without end.
+                if elapsed_s > self.cfg.window_s {
+                    return RedrawStep::Drop;
+                }
                 if !alignable {
                     return RedrawStep::Keep;
                 }
@@ -468,7 +474,6 @@ impl RedrawLog {
                 RedrawStep::Keep
             }
             Phase::Waiting { turned_rad } => {
-                let elapsed_s = now_ns.saturating_sub(self.opened_ns) as f64 * 1e-9;
                 if elapsed_s > self.cfg.window_s {
                     return RedrawStep::Drop;
                 }
@@ -917,6 +922,29 @@ mod tests {
         assert_eq!(
             grid_spread.state_at(drawn.0, drawn.1),
             grid_one.state_at(drawn.0, drawn.1)
+        );
+    }
+
+    #[test]
+    fn a_blind_spell_longer_than_the_window_drops_its_log() {
+        let grid = OccupancyGrid::new(GridConfig::default());
+        let mut log = RedrawLog::open(cfg(), &grid, None, &pose(0.0, 0.0, 0.0), 0);
+        let window_frames = (cfg().window_s * 1e9 / FRAME_NS as f64) as u64;
+        let mut frame = 1;
+        // Blind, turning slowly, for the whole window: the log is kept, and grows.
+        while frame <= window_frames {
+            assert_eq!(
+                step_at(&mut log, frame as f64 * 0.01, false, frame),
+                RedrawStep::Keep
+            );
+            log.log(&GridEdit::Scan(wall_ahead(&pose(0.0, 0.0, 0.0), 1.0)));
+            frame += 1;
+        }
+        assert!(log.edits.len() as u64 >= window_frames);
+        // Still blind past it: dropped, though the scan never came back.
+        assert_eq!(
+            step_at(&mut log, frame as f64 * 0.01, false, frame + 1),
+            RedrawStep::Drop
         );
     }
 }
