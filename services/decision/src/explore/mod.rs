@@ -319,10 +319,11 @@ impl Explorer {
         let early = (reacquiring || self.cfg.redraw.blind_turn_deg > 0.0)
             .then(|| self.grid.scan_hits_robot_frame(scan, self.camera_forward_m));
         if let Some(points) = &early {
+            let alignable = points.len() >= self.cfg.scan_match.min_points as usize;
             if reacquiring {
-                self.track_unaligned(pose, points.len());
+                self.track_unaligned(pose, alignable);
             }
-            if let Some(fix) = self.redraw_step(pose, points.len(), now_ns) {
+            if let Some(fix) = self.redraw_step(pose, alignable, now_ns) {
                 return Some(fix);
             }
         }
@@ -370,18 +371,17 @@ impl Explorer {
     }
 
     /// Opens, steps or closes the log of the grid's edits since a blind turn (`[nav.redraw]`;
-    /// `points` this frame's scan points); once it is re-drawn the copy becomes the grid and
+    /// `alignable` whether this frame's scan has `min_points` points); once it is re-drawn the copy becomes the grid and
     /// the position correction that goes with it is returned.
     fn redraw_step(
         &mut self,
         pose: &DeadReckonedPose,
-        points: usize,
+        alignable: bool,
         now_ns: u64,
     ) -> Option<PoseCorrection> {
         if self.cfg.redraw.blind_turn_deg <= 0.0 {
             return None;
         }
-        let alignable = points >= self.cfg.scan_match.min_points as usize;
         let Some(log) = self.redraw.as_mut() else {
             if !alignable {
                 let spare = self.spare.take();
@@ -431,9 +431,8 @@ impl Explorer {
     }
 
     /// Sums the turn dead reckoning makes from a scan with fewer than `min_points` points
-    /// (`points` this frame) until [`Explorer::reacquire`] closes the arc.
-    fn track_unaligned(&mut self, pose: &DeadReckonedPose, points: usize) {
-        let alignable = points >= self.cfg.scan_match.min_points as usize;
+    /// (`alignable` false this frame) until [`Explorer::reacquire`] closes the arc.
+    fn track_unaligned(&mut self, pose: &DeadReckonedPose, alignable: bool) {
         match self.unaligned.as_mut() {
             Some(arc) => {
                 arc.advance(pose.heading_rad);

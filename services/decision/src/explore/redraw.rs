@@ -141,24 +141,23 @@ impl EditLog {
         self.edits.len()
     }
 
-    /// How well the logged scans' points, placed as a re-draw by `turn_rad` would place
-    /// them, agree with `grid` (the copy taken before the blind turn): points on occupied
-    /// cells less points on free ones, and the points on cells either way. At most
-    /// `max_scans` scans, spread over the log as it was when the search began.
-    fn agreement(
-        &self,
-        redraw: &Redraw,
-        turn_rad: f64,
-        grid: &OccupancyGrid,
-        max_scans: usize,
-    ) -> (i64, usize) {
-        let turn = RigidTurn::new(redraw.pivot_m, turn_rad);
-        let logged = &self.edits[..redraw.searched_edits.min(self.edits.len())];
-        let scans = logged
+    /// The stride over the logged scans that scores at most `max_scans` of them.
+    fn scan_stride(&self, max_scans: usize) -> usize {
+        let scans = self
+            .edits
             .iter()
             .filter(|(_, e)| matches!(e, Logged::Scan { .. }))
             .count();
-        let stride = scans.div_ceil(max_scans.max(1)).max(1);
+        scans.div_ceil(max_scans.max(1)).max(1)
+    }
+
+    /// How well the logged scans' points, placed as a re-draw by `turn_rad` would place
+    /// them, agree with `grid` (the copy taken before the blind turn): points on occupied
+    /// cells less points on free ones, and the points on cells either way. Every
+    /// `redraw.scan_stride`th scan of the log as it was when the search began.
+    fn agreement(&self, redraw: &Redraw, turn_rad: f64, grid: &OccupancyGrid) -> (i64, usize) {
+        let turn = RigidTurn::new(redraw.pivot_m, turn_rad);
+        let logged = &self.edits[..redraw.searched_edits.min(self.edits.len())];
         let (mut score, mut decided) = (0i64, 0usize);
         let scan_edits = logged
             .iter()
@@ -167,7 +166,7 @@ impl EditLog {
                 Logged::Scan { camera, hits, .. } => Some((i, *at, *camera, hits.clone())),
                 _ => None,
             })
-            .step_by(stride);
+            .step_by(redraw.scan_stride);
         for (i, at, camera, hits) in scan_edits {
             let view_rad = turn_rad - redraw.had_rad(i, at);
             let seen_from = turn.point(camera);
@@ -249,6 +248,8 @@ struct Redraw {
     /// The edits the search scores: those logged before it began (the same scans for
     /// every turn tried, over the frames the search takes).
     searched_edits: usize,
+    /// Every this many of those edits' scans are scored (at most `match_max_scans`).
+    scan_stride: usize,
 }
 
 impl Redraw {
@@ -500,6 +501,7 @@ impl RedrawLog {
                         base_rad,
                         from_edit,
                         searched_edits: self.edits.len(),
+                        scan_stride: self.edits.scan_stride(self.cfg.match_max_scans as usize),
                     },
                     jump_rad: c,
                     still: 0,
@@ -559,7 +561,6 @@ impl RedrawLog {
         // about it, and must fit that grid better than no turn at all (a blind
         // turn that was made, followed by the fix of an older error, measured on
         // generated maze 6, must not move the scans).
-        let max_scans = self.cfg.match_max_scans as usize;
         let step = self.cfg.search_step_deg.to_radians();
         let n = (self.cfg.search_deg / self.cfg.search_step_deg).floor() as usize;
         let turns = 2 * n + 2;
@@ -568,13 +569,11 @@ impl RedrawLog {
                 break;
             }
             if *next == 0 {
-                *still = self.edits.agreement(redraw, 0.0, &self.copy, max_scans).0;
+                *still = self.edits.agreement(redraw, 0.0, &self.copy).0;
             } else {
                 let k = (*next - 1) as f64 - n as f64;
                 let turn_rad = *jump_rad + k * step;
-                let (score, decided) = self
-                    .edits
-                    .agreement(redraw, turn_rad, &self.copy, max_scans);
+                let (score, decided) = self.edits.agreement(redraw, turn_rad, &self.copy);
                 // The last of equal scores, as `max_by_key` takes.
                 if best.is_none_or(|(b, ..)| score >= b) {
                     *best = Some((score, decided, turn_rad));
