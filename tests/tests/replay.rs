@@ -95,6 +95,15 @@ fn a_replayed_recording_repeats_every_decision_for_the_same_frame() {
     ]);
     let replay_out = String::from_utf8_lossy(&replay.stdout);
     println!("{replay_out}");
+    // What the stages reported (a failure below is read against these).
+    for (name, out) in [("recorded run", &run), ("replay", &replay)] {
+        for line in String::from_utf8_lossy(&out.stderr)
+            .lines()
+            .filter(|l| l.contains("WARN") || l.contains("ERROR"))
+        {
+            println!("{name} stderr: {line}");
+        }
+    }
     let replay_s: f64 = replay_out
         .split("stopped after ")
         .nth(1)

@@ -6,19 +6,23 @@
 
 use std::process::ExitCode;
 
-use hvs_fusion::pairing::{HeldFrames, HiResults, HiWanted};
+use hvs_fusion::pairing::{HeldFrames, HiResults, HiWanted, Pairing, WaitingMaps};
 use hvs_fusion::{FusionPath, merge_scans, merge_windows};
 use hvs_runtime::clock::monotonic_ns;
 use hvs_runtime::ipc::{ReceivedSample, TopicSubscriber};
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
-    DisparityMap640x480, MAX_RANGE_WINDOWS, ObstacleScan, RangeReport, RangeSource, RangeWindow,
-    Sequenced, StereoFrame320x240, StereoFrame640x480,
+    DisparityMap320x240, DisparityMap640x480, MAX_RANGE_WINDOWS, ObstacleScan, RangeReport,
+    RangeSource, RangeWindow, Sequenced, StereoFrame320x240, StereoFrame640x480,
 };
 use hvs_shared::topics::{self, Stage};
 
 /// Frames kept waiting for their disparity map (the topic allows 5 borrowed samples).
 const HELD_FRAMES: usize = 3;
+
+/// Maps kept waiting for a frame still on its way (with the held frames, within the topic's
+/// 5 borrowed samples).
+const WAITING_MAPS: usize = 2;
 
 /// Long-range results kept for a replay naming an earlier one than the latest.
 const HI_RESULTS_KEPT: usize = 8;
@@ -56,37 +60,57 @@ fn lo_frame_id(s: &ReceivedSample<StereoFrame320x240>) -> u64 {
     s.payload().header.frame_id
 }
 
-/// The long-range side: pairs the newest 640x480 disparity map with its held frame.
+fn hi_map_frame_id(s: &ReceivedSample<DisparityMap640x480>) -> u64 {
+    s.payload().header.frame_id
+}
+
+fn lo_map_frame_id(s: &ReceivedSample<DisparityMap320x240>) -> u64 {
+    s.payload().header.frame_id
+}
+
+/// The long-range side: pairs each 640x480 disparity map with its held frame.
 struct HiSide {
-    frames: TopicSubscriber<StereoFrame640x480>,
     held: HeldFrames<ReceivedSample<StereoFrame640x480>>,
+    waiting: WaitingMaps<ReceivedSample<DisparityMap640x480>>,
     path: FusionPath,
     results: HiResults<HiRanges>,
     unpaired: u64,
 }
 
 impl HiSide {
-    /// Computes the ranges of the newest map, if one arrived.
-    fn take_maps(&mut self, maps: &TopicSubscriber<DisparityMap640x480>) -> Result<(), StageError> {
+    /// Computes the ranges of every map whose frame is here (in the order they came).
+    fn take_maps(
+        &mut self,
+        frames: &TopicSubscriber<StereoFrame640x480>,
+        maps: &TopicSubscriber<DisparityMap640x480>,
+    ) -> Result<(), StageError> {
         maps.clear_events();
-        hold_frames(&self.frames, &mut self.held)?;
-        let Some(map) = maps.receive_latest()? else {
-            return Ok(());
-        };
-        let m = map.payload();
-        let Some(frame) = self.held.find(m.header.frame_id) else {
-            self.unpaired += 1;
-            return Ok(());
-        };
-        let (windows, _, _) =
-            self.path
-                .ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
-        let scan = *self.path.scan();
-        self.results.push(
-            m.header.frame_id,
-            m.header.capture_ns,
-            HiRanges { windows, scan },
-        );
+        hold_frames(frames, &mut self.held)?;
+        while let Some(map) = maps.receive()? {
+            if self.waiting.push(map, &self.held).is_some() {
+                self.unpaired += 1;
+            }
+        }
+        while let Some((map, pairing)) = self.waiting.next_settled(&self.held) {
+            let m = map.payload();
+            let frame = match pairing {
+                Pairing::Held => self.held.find(m.header.frame_id),
+                Pairing::Gone => None,
+            };
+            let Some(frame) = frame else {
+                self.unpaired += 1;
+                continue;
+            };
+            let (windows, _, _) =
+                self.path
+                    .ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
+            let scan = *self.path.scan();
+            self.results.push(
+                m.header.frame_id,
+                m.header.capture_ns,
+                HiRanges { windows, scan },
+            );
+        }
         Ok(())
     }
 }
@@ -95,15 +119,17 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let frames_lo = rt.node.subscriber(&topics::FRAMES_LO, 2)?;
     let disp_lo = rt.node.subscriber(&topics::DISPARITY_LO, 2)?;
     let disp_hi = rt.node.subscriber(&topics::DISPARITY_HI, 1)?;
+    let frames_hi = rt.node.subscriber(&topics::FRAMES_HI, 2)?;
     let mut hi = HiSide {
-        frames: rt.node.subscriber(&topics::FRAMES_HI, 2)?,
         held: HeldFrames::new(HELD_FRAMES, hi_frame_id),
+        waiting: WaitingMaps::new(WAITING_MAPS, hi_map_frame_id),
         path: FusionPath::new(&rt.config, 640, 480, RangeSource::Hi),
         results: HiResults::new(HI_RESULTS_KEPT),
         unpaired: 0,
     };
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
     let mut held_lo = HeldFrames::new(HELD_FRAMES, lo_frame_id);
+    let mut waiting_lo = WaitingMaps::new(WAITING_MAPS, lo_map_frame_id);
     let mut lo_path = FusionPath::new(&rt.config, 320, 240, RangeSource::Lo);
     let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
     let min_valid_px = rt.config.fusion.min_valid_px;
@@ -114,20 +140,31 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let waitset = rt.waitset()?;
     let lo_guard = disp_lo.attach_to(&waitset)?;
     let hi_guard = disp_hi.attach_to(&waitset)?;
+    // Frames wake the stage too: a map that overtook its frame waits for it (WaitingMaps).
+    let lo_frames_guard = frames_lo.attach_to(&waitset)?;
+    let hi_frames_guard = frames_hi.attach_to(&waitset)?;
 
     rt.run_loop(&waitset, |rt, id| {
-        if id.has_event_from(&hi_guard) {
-            hi.take_maps(&disp_hi)?;
+        if id.has_event_from(&hi_guard) || id.has_event_from(&hi_frames_guard) {
+            hi.take_maps(&frames_hi, &disp_hi)?;
         }
-        if id.has_event_from(&lo_guard) {
+        if id.has_event_from(&lo_guard) || id.has_event_from(&lo_frames_guard) {
             disp_lo.clear_events();
             hold_frames(&frames_lo, &mut held_lo)?;
             while let Some(map) = disp_lo.receive()? {
-                let received_ns = monotonic_ns();
                 rt.count_in(1);
-                rt.set_drops(disp_lo.dropped() + unpaired + hi.unpaired);
+                if waiting_lo.push(map, &held_lo).is_some() {
+                    unpaired += 1;
+                }
+            }
+            while let Some((map, pairing)) = waiting_lo.next_settled(&held_lo) {
+                let received_ns = monotonic_ns();
                 let m = map.payload();
-                let Some(frame) = held_lo.find(m.header.frame_id) else {
+                let frame = match pairing {
+                    Pairing::Held => held_lo.find(m.header.frame_id),
+                    Pairing::Gone => None,
+                };
+                let Some(frame) = frame else {
                     unpaired += 1;
                     continue;
                 };
@@ -138,7 +175,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     && hi.results.find(named).is_none()
                 {
                     // Its map may be waiting behind this one.
-                    hi.take_maps(&disp_hi)?;
+                    hi.take_maps(&frames_hi, &disp_hi)?;
                 }
                 let hi_ranges = hi
                     .results
@@ -183,6 +220,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 };
                 rt.send_or_report(&mut ranges, sample, monotonic_ns() - received_ns);
             }
+            rt.set_drops(disp_lo.dropped() + unpaired + hi.unpaired);
         }
         Ok(LoopControl::Continue)
     })
