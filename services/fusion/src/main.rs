@@ -5,11 +5,12 @@
 //! named in the frame header, so the replay does not depend on timing).
 
 use std::process::ExitCode;
+use std::time::Duration;
 
-use hvs_fusion::pairing::{HeldFrames, HiResults, HiWanted, Pairing, WaitingMaps};
+use hvs_fusion::pairing::{HeldFrames, HiResults, HiWanted, Pairing, SettledMap, WaitingMaps};
 use hvs_fusion::{FusionPath, merge_scans, merge_windows};
 use hvs_runtime::clock::monotonic_ns;
-use hvs_runtime::ipc::{ReceivedSample, TopicSubscriber};
+use hvs_runtime::ipc::{ReceivedSample, TopicSubscriber, attach_interval};
 use hvs_runtime::stage::{LoopControl, StageError, StageRuntime, run_stage};
 use hvs_shared::messages::{
     DisparityMap320x240, DisparityMap640x480, MAX_RANGE_WINDOWS, ObstacleScan, RangeReport,
@@ -20,9 +21,16 @@ use hvs_shared::topics::{self, Stage};
 /// Frames kept waiting for their disparity map (the topic allows 5 borrowed samples).
 const HELD_FRAMES: usize = 3;
 
-/// Maps kept waiting for a frame still on its way (with the held frames, within the topic's
-/// 5 borrowed samples).
+/// Maps kept waiting for a frame still on its way (each subscriber may borrow 5 samples).
 const WAITING_MAPS: usize = 2;
+
+/// Longest wait of a replayed fast-path map for the 640x480 result its frame names, ns:
+/// the capture sends the frame only after that result was published, so it is on its way
+/// (the stereo worker was preempted between its subscribers); past this, it was lost.
+const NAMED_WAIT_NS: u64 = 1_000_000_000;
+
+/// How often the stage looks at a map waiting for a named result when nothing arrives.
+const WAIT_CHECK: Duration = Duration::from_millis(100);
 
 /// Long-range results kept for a replay naming an earlier one than the latest.
 const HI_RESULTS_KEPT: usize = 8;
@@ -74,11 +82,14 @@ struct HiSide {
     waiting: WaitingMaps<ReceivedSample<DisparityMap640x480>>,
     path: FusionPath,
     results: HiResults<HiRanges>,
+    /// Frame id of the last map received.
+    last_map_id: Option<u64>,
     unpaired: u64,
 }
 
 impl HiSide {
-    /// Computes the ranges of every map whose frame is here (in the order they came).
+    /// Computes the ranges of every map whose frame is here (in the order they came; each
+    /// map settles before the next is queued, so none is pushed out while its frame waits).
     fn take_maps(
         &mut self,
         frames: &TopicSubscriber<StereoFrame640x480>,
@@ -86,32 +97,49 @@ impl HiSide {
     ) -> Result<(), StageError> {
         maps.clear_events();
         hold_frames(frames, &mut self.held)?;
-        while let Some(map) = maps.receive()? {
-            if self.waiting.push(map, &self.held).is_some() {
-                self.unpaired += 1;
+        loop {
+            let received = maps.receive()?;
+            let more = received.is_some();
+            if let Some(map) = received {
+                self.last_map_id = Some(map.payload().header.frame_id);
+                if self.waiting.push(map, &self.held, monotonic_ns()).is_some() {
+                    self.unpaired += 1;
+                }
+            }
+            while let Some(settled) = self.waiting.next_settled(&self.held) {
+                self.fuse(&settled);
+            }
+            if !more {
+                return Ok(());
             }
         }
-        while let Some((map, pairing)) = self.waiting.next_settled(&self.held) {
-            let m = map.payload();
-            let frame = match pairing {
-                Pairing::Held => self.held.find(m.header.frame_id),
-                Pairing::Gone => None,
-            };
-            let Some(frame) = frame else {
-                self.unpaired += 1;
-                continue;
-            };
-            let (windows, _, _) =
-                self.path
-                    .ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
-            let scan = *self.path.scan();
-            self.results.push(
-                m.header.frame_id,
-                m.header.capture_ns,
-                HiRanges { windows, scan },
-            );
-        }
-        Ok(())
+    }
+
+    fn fuse(&mut self, settled: &SettledMap<ReceivedSample<DisparityMap640x480>>) {
+        let m = settled.map.payload();
+        let frame = match settled.pairing {
+            Pairing::Held => self.held.find(m.header.frame_id),
+            Pairing::Gone => None,
+        };
+        let Some(frame) = frame else {
+            self.unpaired += 1;
+            return;
+        };
+        let (windows, _, _) =
+            self.path
+                .ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
+        let scan = *self.path.scan();
+        self.results.push(
+            m.header.frame_id,
+            m.header.capture_ns,
+            HiRanges { windows, scan },
+        );
+    }
+
+    /// True when the result of `frame_id` can still come: no map of that frame or a newer
+    /// one has been received, or a received map still waits for its frame.
+    fn may_come(&self, frame_id: u64) -> bool {
+        self.last_map_id.is_none_or(|last| last < frame_id) || !self.waiting.is_empty()
     }
 }
 
@@ -125,6 +153,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         waiting: WaitingMaps::new(WAITING_MAPS, hi_map_frame_id),
         path: FusionPath::new(&rt.config, 640, 480, RangeSource::Hi),
         results: HiResults::new(HI_RESULTS_KEPT),
+        last_map_id: None,
         unpaired: 0,
     };
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
@@ -138,29 +167,39 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     rt.set_note(format!("{} windows", rt.config.fusion.windows));
 
     let waitset = rt.waitset()?;
-    let lo_guard = disp_lo.attach_to(&waitset)?;
-    let hi_guard = disp_hi.attach_to(&waitset)?;
-    // Frames wake the stage too: a map that overtook its frame waits for it (WaitingMaps).
-    let lo_frames_guard = frames_lo.attach_to(&waitset)?;
-    let hi_frames_guard = frames_hi.attach_to(&waitset)?;
+    // Maps, frames (a map that overtook its frame waits for it) and a periodic check (a
+    // replayed map waiting for its named 640x480 result) wake the stage.
+    let _maps_lo = disp_lo.attach_to(&waitset)?;
+    let _maps_hi = disp_hi.attach_to(&waitset)?;
+    let _frames_lo = frames_lo.attach_to(&waitset)?;
+    let _frames_hi = frames_hi.attach_to(&waitset)?;
+    let _wait_check = attach_interval(&waitset, WAIT_CHECK)?;
 
-    rt.run_loop(&waitset, |rt, id| {
-        if id.has_event_from(&hi_guard) || id.has_event_from(&hi_frames_guard) {
-            hi.take_maps(&frames_hi, &disp_hi)?;
-        }
-        if id.has_event_from(&lo_guard) || id.has_event_from(&lo_frames_guard) {
-            disp_lo.clear_events();
-            hold_frames(&frames_lo, &mut held_lo)?;
-            while let Some(map) = disp_lo.receive()? {
+    rt.run_loop(&waitset, |rt, _woken_by| {
+        // Whatever woke the stage, both sides take what came.
+        hi.take_maps(&frames_hi, &disp_hi)?;
+        disp_lo.clear_events();
+        hold_frames(&frames_lo, &mut held_lo)?;
+        loop {
+            let received = disp_lo.receive()?;
+            let more = received.is_some();
+            if let Some(map) = received {
                 rt.count_in(1);
-                if waiting_lo.push(map, &held_lo).is_some() {
+                if waiting_lo.push(map, &held_lo, monotonic_ns()).is_some() {
                     unpaired += 1;
                 }
             }
-            while let Some((map, pairing)) = waiting_lo.next_settled(&held_lo) {
-                let received_ns = monotonic_ns();
-                let m = map.payload();
-                let frame = match pairing {
+            while let Some(pairing) = waiting_lo.front_pairing(&held_lo) {
+                if pairing == Pairing::Held
+                    && named_result_pending(&waiting_lo, &held_lo, &mut hi, &frames_hi, &disp_hi)?
+                {
+                    break;
+                }
+                let Some(settled) = waiting_lo.next_settled(&held_lo) else {
+                    break;
+                };
+                let m = settled.map.payload();
+                let frame = match settled.pairing {
                     Pairing::Held => held_lo.find(m.header.frame_id),
                     Pairing::Gone => None,
                 };
@@ -171,12 +210,6 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 let (lo_windows, edge_px, valid_edge_px) =
                     lo_path.ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
                 let wanted = HiWanted::from_header(frame.payload().header.replay_hi_frame_id);
-                if let HiWanted::Named(named) = wanted
-                    && hi.results.find(named).is_none()
-                {
-                    // Its map may be waiting behind this one.
-                    hi.take_maps(&frames_hi, &disp_hi)?;
-                }
                 let hi_ranges = hi
                     .results
                     .choose(wanted, m.header.capture_ns, hi_max_age_ns);
@@ -218,10 +251,43 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                     reserved: 0,
                     scan: merge_scans(lo_path.scan(), hi_ranges.map(|h| &h.result.scan)),
                 };
-                rt.send_or_report(&mut ranges, sample, monotonic_ns() - received_ns);
+                rt.send_or_report(&mut ranges, sample, monotonic_ns() - settled.received_ns);
             }
-            rt.set_drops(disp_lo.dropped() + unpaired + hi.unpaired);
+            if !more {
+                break;
+            }
         }
+        rt.set_drops(disp_lo.dropped() + unpaired + hi.unpaired);
         Ok(LoopControl::Continue)
     })
+}
+
+/// True when the oldest waiting fast-path map, whose frame is held, must wait on: its frame
+/// is replayed and names a 640x480 result that is not here yet but may still come (for at
+/// most [`NAMED_WAIT_NS`] after the map arrived).
+fn named_result_pending(
+    waiting_lo: &WaitingMaps<ReceivedSample<DisparityMap320x240>>,
+    held_lo: &HeldFrames<ReceivedSample<StereoFrame320x240>>,
+    hi: &mut HiSide,
+    frames_hi: &TopicSubscriber<StereoFrame640x480>,
+    disp_hi: &TopicSubscriber<DisparityMap640x480>,
+) -> Result<bool, StageError> {
+    let Some((map, received_ns)) = waiting_lo.front() else {
+        return Ok(false);
+    };
+    let Some(frame) = held_lo.find(map.payload().header.frame_id) else {
+        return Ok(false);
+    };
+    let HiWanted::Named(named) = HiWanted::from_header(frame.payload().header.replay_hi_frame_id)
+    else {
+        return Ok(false);
+    };
+    if hi.results.find(named).is_some() {
+        return Ok(false);
+    }
+    // Its map may have come since the stage woke.
+    hi.take_maps(frames_hi, disp_hi)?;
+    Ok(hi.results.find(named).is_none()
+        && hi.may_come(named)
+        && monotonic_ns().saturating_sub(received_ns) < NAMED_WAIT_NS)
 }

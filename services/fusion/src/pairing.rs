@@ -11,12 +11,17 @@ use hvs_shared::messages::NO_HI_FRAME;
 
 /// Items waiting for a partner with the same frame id; the newest `capacity` are kept (an
 /// older one is dropped when a new one comes).
+///
+/// Frame ids rise. An item whose id is not above the newest one's starts a new numbering
+/// (a restarted capture): the items of the old one are dropped, so that a map is never
+/// paired with an old frame of the same id.
 #[derive(Debug)]
 pub struct HeldFrames<T> {
     items: VecDeque<T>,
     capacity: usize,
     frame_id: fn(&T) -> u64,
-    pushed: u64,
+    newest_id: Option<u64>,
+    numbering: u64,
 }
 
 impl<T> HeldFrames<T> {
@@ -26,33 +31,35 @@ impl<T> HeldFrames<T> {
             items: VecDeque::with_capacity(capacity.max(1)),
             capacity: capacity.max(1),
             frame_id,
-            pushed: 0,
+            newest_id: None,
+            numbering: 0,
         }
     }
 
-    /// Holds `item`, dropping the oldest when full.
+    /// Holds `item`, dropping the oldest when full (all of them when its id starts a new
+    /// numbering).
     pub fn push(&mut self, item: T) {
+        let id = (self.frame_id)(&item);
+        if self.newest_id.is_some_and(|newest| id <= newest) {
+            self.items.clear();
+            self.numbering += 1;
+        }
+        self.newest_id = Some(id);
         if self.items.len() == self.capacity {
             self.items.pop_front();
         }
         self.items.push_back(item);
-        self.pushed += 1;
+    }
+
+    /// How many times the frame ids started again since the start.
+    pub fn numbering(&self) -> u64 {
+        self.numbering
     }
 
     /// True when a held item is newer than `frame_id`: frames come in id order, so an item
     /// of that id that is not held will not come any more.
     pub fn any_newer_than(&self, frame_id: u64) -> bool {
         self.items.iter().any(|i| (self.frame_id)(i) > frame_id)
-    }
-
-    /// Most items held at once.
-    pub fn capacity(&self) -> usize {
-        self.capacity
-    }
-
-    /// Items pushed since the start (held or dropped since): an arrival counter.
-    pub fn pushed(&self) -> u64 {
-        self.pushed
     }
 
     /// The held item of `frame_id`, if it is still held.
@@ -71,14 +78,26 @@ impl<T> HeldFrames<T> {
     }
 }
 
-/// Where a waiting map's frame is.
+/// Where a waiting map's frame is, once that is settled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Pairing {
     /// Held: the map can be fused.
     Held,
-    /// The map's frame is not held and a newer frame is: it was lost (or the map came too
-    /// late for it), and the map is dropped.
+    /// The map's frame is not held and will not come: a newer frame is held (the frame was
+    /// lost, or the map came too late for it), or the frame ids started again since the
+    /// map came. The map is dropped.
     Gone,
+}
+
+/// A disparity map taken from [`WaitingMaps`].
+#[derive(Debug)]
+pub struct SettledMap<M> {
+    /// The map.
+    pub map: M,
+    /// Whether its frame is held.
+    pub pairing: Pairing,
+    /// When the map was received, CLOCK_MONOTONIC ns (its wait counts in the latency).
+    pub received_ns: u64,
 }
 
 /// Disparity maps waiting for their frame, oldest first, at most `capacity` (samples stay
@@ -86,13 +105,13 @@ pub enum Pairing {
 ///
 /// A frame normally arrives long before its map: the matcher starts from that frame. But
 /// one publish reaches the subscribers one after another, so on a busy machine the matcher
-/// can get the frame, match it and publish the map while the publisher is still preempted
-/// before it queued the frame for fusion. Such a map waits here until its frame arrives, or
-/// a newer one (proof that its frame was lost).
+/// (awake, and taking the newest frame) can get the frame, match it and publish the map
+/// while the publisher is still preempted before it queued the frame for fusion. Such a map
+/// waits here until its frame arrives, or a newer one (proof that its frame was lost).
 #[derive(Debug)]
 pub struct WaitingMaps<M> {
-    /// Each map with [`HeldFrames::pushed`] when it arrived.
-    maps: VecDeque<(M, u64)>,
+    /// Each map with [`HeldFrames::numbering`] and the time when it arrived.
+    maps: VecDeque<(M, u64, u64)>,
     capacity: usize,
     frame_id: fn(&M) -> u64,
 }
@@ -107,34 +126,49 @@ impl<M> WaitingMaps<M> {
         }
     }
 
-    /// Queues a map that arrived when `held` had the frames it has now; returns the oldest
-    /// waiting map when full (it is dropped unpaired).
-    pub fn push<F>(&mut self, map: M, held: &HeldFrames<F>) -> Option<M> {
+    /// Queues a map received at `received_ns` while `held` holds the frames it holds now;
+    /// returns the oldest waiting map when full (it is dropped unpaired).
+    pub fn push<F>(&mut self, map: M, held: &HeldFrames<F>, received_ns: u64) -> Option<M> {
         let evicted = if self.maps.len() == self.capacity {
-            self.maps.pop_front().map(|(m, _)| m)
+            self.maps.pop_front().map(|(m, _, _)| m)
         } else {
             None
         };
-        self.maps.push_back((map, held.pushed()));
+        self.maps.push_back((map, held.numbering(), received_ns));
         evicted
     }
 
-    /// Takes the oldest map if its pairing is settled: its frame is held, or it is not held
-    /// and a newer frame is (or more frames came since the map than are held: the frame ids
-    /// started again, a restarted capture). `None` while the oldest still waits (or none
-    /// waits): maps are fused in the order they came.
-    pub fn next_settled<F>(&mut self, held: &HeldFrames<F>) -> Option<(M, Pairing)> {
-        let (map, arrived_at) = self.maps.front()?;
-        let pairing = if held.find((self.frame_id)(map)).is_some() {
-            Pairing::Held
-        } else if held.any_newer_than((self.frame_id)(map))
-            || held.pushed() > *arrived_at + held.capacity() as u64
-        {
-            Pairing::Gone
+    /// The oldest map, if any waits, with the time it was received (CLOCK_MONOTONIC ns).
+    pub fn front(&self) -> Option<(&M, u64)> {
+        self.maps
+            .front()
+            .map(|(m, _, received_ns)| (m, *received_ns))
+    }
+
+    /// Whether the oldest map's pairing is settled: `None` while it still waits for its
+    /// frame (or no map waits). Maps are fused in the order they came.
+    pub fn front_pairing<F>(&self, held: &HeldFrames<F>) -> Option<Pairing> {
+        let (map, numbering, _) = self.maps.front()?;
+        let id = (self.frame_id)(map);
+        if held.find(id).is_some() {
+            Some(Pairing::Held)
+        } else if held.numbering() != *numbering || held.any_newer_than(id) {
+            Some(Pairing::Gone)
         } else {
-            return None;
-        };
-        self.maps.pop_front().map(|(m, _)| (m, pairing))
+            None
+        }
+    }
+
+    /// Takes the oldest map if its pairing is settled.
+    pub fn next_settled<F>(&mut self, held: &HeldFrames<F>) -> Option<SettledMap<M>> {
+        let pairing = self.front_pairing(held)?;
+        self.maps
+            .pop_front()
+            .map(|(map, _, received_ns)| SettledMap {
+                map,
+                pairing,
+                received_ns,
+            })
     }
 
     /// Maps waiting now.
@@ -257,62 +291,87 @@ mod tests {
         assert!(one.find(8).is_some());
     }
 
+    /// Settles the oldest waiting map: its id and pairing.
+    fn settle(waiting: &mut WaitingMaps<u64>, held: &HeldFrames<u64>) -> Option<(u64, Pairing)> {
+        waiting.next_settled(held).map(|s| (s.map, s.pairing))
+    }
+
+    fn stage() -> (HeldFrames<u64>, WaitingMaps<u64>) {
+        (
+            HeldFrames::new(3, |f: &u64| *f),
+            WaitingMaps::new(2, |m: &u64| *m),
+        )
+    }
+
     #[test]
-    fn a_map_that_overtook_its_frame_waits_for_it() {
-        let mut held = HeldFrames::new(3, |f: &u64| *f);
-        let mut waiting = WaitingMaps::new(2, |m: &(u64, &str)| m.0);
+    fn a_map_that_overtook_its_frame_waits_for_it_in_order() {
+        let (mut held, mut waiting) = stage();
         held.push(1);
-        // Map 1 finds its frame at once.
-        assert!(waiting.push((1, "map 1"), &held).is_none());
+        assert!(waiting.push(1, &held, 10).is_none());
+        let first = waiting.next_settled(&held).expect("frame 1 is held");
         assert_eq!(
-            waiting.next_settled(&held),
-            Some(((1, "map 1"), Pairing::Held))
+            (first.map, first.pairing, first.received_ns),
+            (1, Pairing::Held, 10)
         );
-        // Map 2 came before frame 2: it waits, and so does map 3 behind it.
-        assert!(waiting.push((2, "map 2"), &held).is_none());
-        assert!(waiting.next_settled(&held).is_none());
-        assert!(waiting.push((3, "map 3"), &held).is_none());
+        // Map 2 came before frame 2: it waits, and map 3 behind it too.
+        waiting.push(2, &held, 20);
+        assert_eq!(settle(&mut waiting, &held), None);
+        waiting.push(3, &held, 30);
         assert_eq!(waiting.len(), 2);
         held.push(2);
-        assert_eq!(
-            waiting.next_settled(&held),
-            Some(((2, "map 2"), Pairing::Held))
-        );
-        assert!(
-            waiting.next_settled(&held).is_none(),
-            "frame 3 has not come"
-        );
-        // Frame 3 was lost: frame 4 comes and settles map 3 as gone.
-        held.push(4);
-        assert_eq!(
-            waiting.next_settled(&held),
-            Some(((3, "map 3"), Pairing::Gone))
-        );
+        let second = waiting.next_settled(&held).expect("frame 2 came");
+        assert_eq!((second.map, second.received_ns), (2, 20), "its wait counts");
+        assert_eq!(settle(&mut waiting, &held), None, "frame 3 has not come");
+        held.push(3);
+        assert_eq!(settle(&mut waiting, &held), Some((3, Pairing::Held)));
         assert!(waiting.is_empty());
-        // A map for a frame older than the held ones (2, 4, 5) is gone at once.
-        held.push(5);
-        waiting.push((1, "late map 1"), &held);
-        assert_eq!(
-            waiting.next_settled(&held),
-            Some(((1, "late map 1"), Pairing::Gone))
-        );
-        // Frame ids that start again (a restarted capture): a map of the old numbering
-        // waits until more frames came than are held.
-        waiting.push((9, "old map 9"), &held);
-        for id in 1..=3 {
+    }
+
+    #[test]
+    fn a_map_whose_frame_was_lost_is_settled_by_a_newer_frame() {
+        let (mut held, mut waiting) = stage();
+        held.push(1);
+        waiting.push(2, &held, 0);
+        assert_eq!(settle(&mut waiting, &held), None);
+        held.push(3);
+        assert_eq!(settle(&mut waiting, &held), Some((2, Pairing::Gone)));
+        // A map older than the held frames is gone at once.
+        for id in 4..=6 {
             held.push(id);
-            assert!(waiting.next_settled(&held).is_none());
         }
-        held.push(4);
-        assert_eq!(
-            waiting.next_settled(&held),
-            Some(((9, "old map 9"), Pairing::Gone))
-        );
-        // When full, the oldest is given back to be counted unpaired.
-        waiting.push((6, "map 6"), &held);
-        waiting.push((7, "map 7"), &held);
-        assert_eq!(waiting.push((8, "map 8"), &held), Some((6, "map 6")));
-        assert_eq!(held.pushed(), 8);
+        waiting.push(3, &held, 40);
+        assert_eq!(waiting.front(), Some((&3, 40)));
+        assert_eq!(settle(&mut waiting, &held), Some((3, Pairing::Gone)));
+        // When full, the oldest is given back, to be counted unpaired.
+        waiting.push(7, &held, 0);
+        waiting.push(8, &held, 0);
+        assert_eq!(waiting.push(9, &held, 0), Some(7));
+    }
+
+    #[test]
+    fn frame_ids_that_start_again_drop_the_old_numbering() {
+        let (mut held, mut waiting) = stage();
+        for id in 98..=100 {
+            held.push(id);
+        }
+        // A map of the old numbering waits for frame 101, which never comes.
+        waiting.push(101, &held, 0);
+        assert_eq!(held.numbering(), 0);
+        // The capture restarts: frame ids from 1. The old frames go, and the old map with
+        // them; the new ones pair.
+        held.push(1);
+        assert_eq!((held.numbering(), held.len()), (1, 1));
+        assert!(held.find(99).is_none());
+        assert_eq!(settle(&mut waiting, &held), Some((101, Pairing::Gone)));
+        waiting.push(1, &held, 0);
+        waiting.push(2, &held, 0);
+        assert_eq!(settle(&mut waiting, &held), Some((1, Pairing::Held)));
+        assert_eq!(settle(&mut waiting, &held), None, "map 2 overtook frame 2");
+        held.push(2);
+        assert_eq!(settle(&mut waiting, &held), Some((2, Pairing::Held)));
+        // An id seen again also starts a new numbering: no pairing with the old frame.
+        held.push(2);
+        assert_eq!((held.numbering(), held.len()), (2, 1));
     }
 
     #[test]
