@@ -24,10 +24,13 @@ const HELD_FRAMES: usize = 3;
 /// Maps kept waiting for a frame still on its way (each subscriber may borrow 5 samples).
 const WAITING_MAPS: usize = 2;
 
-/// Longest wait of a replayed fast-path map for the 640x480 result its frame names, ns:
-/// the capture sends the frame only after that result was published, so it is on its way
-/// (the stereo worker was preempted between its subscribers); past this, it was lost.
-const NAMED_WAIT_NS: u64 = 1_000_000_000;
+/// Longest wait of a replayed fast-path map for the 640x480 result its frame names, ns. In
+/// a lockstep replay the result is on its way: the capture sent the frame after that
+/// result was published (stereo-hi preempted between its subscribers), or, for the result
+/// of the frame's own step, right after the 640x480 pair (stereo-hi, niced, has taken over
+/// 2 s for one frame on a busy machine). Past this it was lost. A replay at a set rate does
+/// not wait: there newer frames are queued behind the map.
+const NAMED_WAIT_NS: u64 = 5_000_000_000;
 
 /// How often the stage looks at a map waiting for a named result when nothing arrives.
 const WAIT_CHECK: Duration = Duration::from_millis(100);
@@ -96,8 +99,10 @@ impl HiSide {
         maps: &TopicSubscriber<DisparityMap640x480>,
     ) -> Result<(), StageError> {
         maps.clear_events();
-        hold_frames(frames, &mut self.held)?;
         loop {
+            // Frames first, each time: a frame queued meanwhile settles its waiting map
+            // before the next map can push that one out.
+            hold_frames(frames, &mut self.held)?;
             let received = maps.receive()?;
             let more = received.is_some();
             if let Some(map) = received {
@@ -179,8 +184,8 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         // Whatever woke the stage, both sides take what came.
         hi.take_maps(&frames_hi, &disp_hi)?;
         disp_lo.clear_events();
-        hold_frames(&frames_lo, &mut held_lo)?;
         loop {
+            hold_frames(&frames_lo, &mut held_lo)?;
             let received = disp_lo.receive()?;
             let more = received.is_some();
             if let Some(map) = received {
@@ -262,9 +267,9 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     })
 }
 
-/// True when the oldest waiting fast-path map, whose frame is held, must wait on: its frame
-/// is replayed and names a 640x480 result that is not here yet but may still come (for at
-/// most [`NAMED_WAIT_NS`] after the map arrived).
+/// True when the oldest waiting fast-path map, whose frame is held, must wait on: it is the
+/// newest, and its frame is replayed and names a 640x480 result that is not here yet but
+/// may still come (for at most [`NAMED_WAIT_NS`] after the map arrived).
 fn named_result_pending(
     waiting_lo: &WaitingMaps<ReceivedSample<DisparityMap320x240>>,
     held_lo: &HeldFrames<ReceivedSample<StereoFrame320x240>>,
@@ -275,7 +280,12 @@ fn named_result_pending(
     let Some((map, received_ns)) = waiting_lo.front() else {
         return Ok(false);
     };
-    let Some(frame) = held_lo.find(map.payload().header.frame_id) else {
+    let id = map.payload().header.frame_id;
+    // Newer maps or frames queued behind it (a replay at a set rate): no waiting.
+    if waiting_lo.len() > 1 || held_lo.any_newer_than(id) {
+        return Ok(false);
+    }
+    let Some(frame) = held_lo.find(id) else {
         return Ok(false);
     };
     let HiWanted::Named(named) = HiWanted::from_header(frame.payload().header.replay_hi_frame_id)
