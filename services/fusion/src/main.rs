@@ -63,20 +63,12 @@ where
     Ok(())
 }
 
-fn hi_frame_id(s: &ReceivedSample<StereoFrame640x480>) -> u64 {
-    s.payload().header.frame_id
-}
-
-fn lo_frame_id(s: &ReceivedSample<StereoFrame320x240>) -> u64 {
-    s.payload().header.frame_id
-}
-
-fn hi_map_frame_id(s: &ReceivedSample<DisparityMap640x480>) -> u64 {
-    s.payload().header.frame_id
-}
-
-fn lo_map_frame_id(s: &ReceivedSample<DisparityMap320x240>) -> u64 {
-    s.payload().header.frame_id
+/// The frame id of a frame or disparity map sample (its sequence number).
+fn frame_id<T>(s: &ReceivedSample<T>) -> u64
+where
+    T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Sequenced + 'static,
+{
+    s.payload().sequence()
 }
 
 /// The long-range side: pairs each 640x480 disparity map with its held frame.
@@ -121,15 +113,11 @@ impl HiSide {
     }
 
     fn fuse(&mut self, settled: &SettledMap<ReceivedSample<DisparityMap640x480>>) {
-        let m = settled.map.payload();
-        let frame = match settled.pairing {
-            Pairing::Held => self.held.find(m.header.frame_id),
-            Pairing::Gone => None,
-        };
-        let Some(frame) = frame else {
+        let Some(frame) = self.held.paired(settled) else {
             self.unpaired += 1;
             return;
         };
+        let m = settled.map.payload();
         let (windows, _, _) =
             self.path
                 .ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
@@ -154,16 +142,16 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     let disp_hi = rt.node.subscriber(&topics::DISPARITY_HI, 1)?;
     let frames_hi = rt.node.subscriber(&topics::FRAMES_HI, 2)?;
     let mut hi = HiSide {
-        held: HeldFrames::new(HELD_FRAMES, hi_frame_id),
-        waiting: WaitingMaps::new(WAITING_MAPS, hi_map_frame_id),
+        held: HeldFrames::new(HELD_FRAMES, frame_id),
+        waiting: WaitingMaps::new(WAITING_MAPS, frame_id),
         path: FusionPath::new(&rt.config, 640, 480, RangeSource::Hi),
         results: HiResults::new(HI_RESULTS_KEPT),
         last_map_id: None,
         unpaired: 0,
     };
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
-    let mut held_lo = HeldFrames::new(HELD_FRAMES, lo_frame_id);
-    let mut waiting_lo = WaitingMaps::new(WAITING_MAPS, lo_map_frame_id);
+    let mut held_lo = HeldFrames::new(HELD_FRAMES, frame_id);
+    let mut waiting_lo = WaitingMaps::new(WAITING_MAPS, frame_id);
     let mut lo_path = FusionPath::new(&rt.config, 320, 240, RangeSource::Lo);
     let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
     let min_valid_px = rt.config.fusion.min_valid_px;
@@ -195,23 +183,17 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
                 }
             }
             while let Some(pairing) = waiting_lo.front_pairing(&held_lo) {
-                if pairing == Pairing::Held
-                    && named_result_pending(&waiting_lo, &held_lo, &mut hi, &frames_hi, &disp_hi)?
-                {
+                if pairing == Pairing::Held && named_result_pending(&waiting_lo, &held_lo, &hi) {
                     break;
                 }
                 let Some(settled) = waiting_lo.next_settled(&held_lo) else {
                     break;
                 };
-                let m = settled.map.payload();
-                let frame = match settled.pairing {
-                    Pairing::Held => held_lo.find(m.header.frame_id),
-                    Pairing::Gone => None,
-                };
-                let Some(frame) = frame else {
+                let Some(frame) = held_lo.paired(&settled) else {
                     unpaired += 1;
                     continue;
                 };
+                let m = settled.map.payload();
                 let (lo_windows, edge_px, valid_edge_px) =
                     lo_path.ranges(&frame.payload().left, &m.disparity_q8, Some(&m.confidence));
                 let wanted = HiWanted::from_header(frame.payload().header.replay_hi_frame_id);
@@ -273,31 +255,25 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
 fn named_result_pending(
     waiting_lo: &WaitingMaps<ReceivedSample<DisparityMap320x240>>,
     held_lo: &HeldFrames<ReceivedSample<StereoFrame320x240>>,
-    hi: &mut HiSide,
-    frames_hi: &TopicSubscriber<StereoFrame640x480>,
-    disp_hi: &TopicSubscriber<DisparityMap640x480>,
-) -> Result<bool, StageError> {
+    hi: &HiSide,
+) -> bool {
     let Some((map, received_ns)) = waiting_lo.front() else {
-        return Ok(false);
+        return false;
     };
     let id = map.payload().header.frame_id;
     // Newer maps or frames queued behind it (a replay at a set rate): no waiting.
     if waiting_lo.len() > 1 || held_lo.any_newer_than(id) {
-        return Ok(false);
+        return false;
     }
     let Some(frame) = held_lo.find(id) else {
-        return Ok(false);
+        return false;
     };
     let HiWanted::Named(named) = HiWanted::from_header(frame.payload().header.replay_hi_frame_id)
     else {
-        return Ok(false);
+        return false;
     };
-    if hi.results.find(named).is_some() {
-        return Ok(false);
-    }
-    // Its map may have come since the stage woke.
-    hi.take_maps(frames_hi, disp_hi)?;
-    Ok(hi.results.find(named).is_none()
+    // The 640x480 maps were taken when the stage woke; one that comes later wakes it again.
+    hi.results.find(named).is_none()
         && hi.may_come(named)
-        && monotonic_ns().saturating_sub(received_ns) < NAMED_WAIT_NS)
+        && monotonic_ns().saturating_sub(received_ns) < NAMED_WAIT_NS
 }

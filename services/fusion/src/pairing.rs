@@ -62,6 +62,14 @@ impl<T> HeldFrames<T> {
         self.items.iter().any(|i| (self.frame_id)(i) > frame_id)
     }
 
+    /// The frame a settled map pairs with: held, and of the map's frame id.
+    pub fn paired<M>(&self, settled: &SettledMap<M>) -> Option<&T> {
+        match settled.pairing {
+            Pairing::Held => self.find(settled.frame_id),
+            Pairing::Gone => None,
+        }
+    }
+
     /// The held item of `frame_id`, if it is still held.
     pub fn find(&self, frame_id: u64) -> Option<&T> {
         self.items.iter().find(|i| (self.frame_id)(i) == frame_id)
@@ -94,6 +102,8 @@ pub enum Pairing {
 pub struct SettledMap<M> {
     /// The map.
     pub map: M,
+    /// Its frame id.
+    pub frame_id: u64,
     /// Whether its frame is held.
     pub pairing: Pairing,
     /// When the map was received, CLOCK_MONOTONIC ns (its wait counts in the latency).
@@ -165,6 +175,7 @@ impl<M> WaitingMaps<M> {
         self.maps
             .pop_front()
             .map(|(map, _, received_ns)| SettledMap {
+                frame_id: (self.frame_id)(&map),
                 map,
                 pairing,
                 received_ns,
@@ -313,6 +324,7 @@ mod tests {
             (first.map, first.pairing, first.received_ns),
             (1, Pairing::Held, 10)
         );
+        assert_eq!(held.paired(&first), Some(&1));
         // Map 2 came before frame 2: it waits, and map 3 behind it too.
         waiting.push(2, &held, 20);
         assert_eq!(settle(&mut waiting, &held), None);
@@ -334,7 +346,13 @@ mod tests {
         waiting.push(2, &held, 0);
         assert_eq!(settle(&mut waiting, &held), None);
         held.push(3);
-        assert_eq!(settle(&mut waiting, &held), Some((2, Pairing::Gone)));
+        let lost = waiting.next_settled(&held).expect("frame 3 settles map 2");
+        assert_eq!((lost.map, lost.pairing), (2, Pairing::Gone));
+        assert_eq!(
+            held.paired(&lost),
+            None,
+            "no frame for a map settled as gone"
+        );
         // A map older than the held frames is gone at once.
         for id in 4..=6 {
             held.push(id);

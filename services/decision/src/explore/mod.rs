@@ -371,8 +371,8 @@ impl Explorer {
     }
 
     /// Opens, steps or closes the log of the grid's edits since a blind turn (`[nav.redraw]`;
-    /// `alignable` whether this frame's scan has `min_points` points); once it is re-drawn the copy becomes the grid and
-    /// the position correction that goes with it is returned.
+    /// `alignable` whether this frame's scan has `min_points` points); once it is re-drawn
+    /// the copy becomes the grid and the position correction that goes with it is returned.
     fn redraw_step(
         &mut self,
         pose: &DeadReckonedPose,
