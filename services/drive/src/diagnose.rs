@@ -9,7 +9,8 @@ use hvs_decision::explore::grid::{OccupancyGrid, to_grid_frame};
 use hvs_decision::local_map::CellState;
 use hvs_decision::odometry::DeadReckonedPose;
 use hvs_runtime::config::RobotConfig;
-use hvs_sim::{GridMap, Pose};
+use hvs_shared::messages::{ObstacleScan, SCAN_BINS};
+use hvs_sim::{Eye, GridMap, Pose, StereoRig, Vec2};
 
 /// What the diagnosis compares: the true map and pose, the explorer's grid and pose.
 pub struct Scene<'a> {
@@ -239,6 +240,28 @@ fn picture(scene: &Scene<'_>, half_m: f64) -> String {
     out
 }
 
+/// The depth (along the optical axis, metres) of the nearest wall along each bin's viewing
+/// direction of `scan`, cast from the left eye of the robot at `robot` on the true map (0:
+/// nothing hit): what a perfect matcher would give for the bin's middle column (the
+/// `truth` trace line beside the `scan` one).
+pub fn true_scan_depths(
+    map: &GridMap,
+    rig: &StereoRig,
+    robot: &Pose,
+    scan: &ObstacleScan,
+) -> [f64; SCAN_BINS] {
+    let eye = rig.eye_position(robot, Eye::Left);
+    let mut depths = [0.0; SCAN_BINS];
+    for (i, depth) in depths.iter_mut().enumerate() {
+        let angle = scan.bin_tangent(i).atan();
+        let dir = Vec2::from_heading(robot.heading_rad + angle);
+        if let Some(hit) = map.cast_ray(eye, dir) {
+            *depth = hit.distance_m * angle.cos();
+        }
+    }
+    depths
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -295,5 +318,25 @@ mod tests {
         assert_eq!((occupied, unknown_now), (0, 0));
         assert_eq!(free, unknown);
         assert!(seen > free / 2, "{seen} of {free}");
+    }
+
+    #[test]
+    fn the_true_scan_ranges_a_wall_ahead_at_its_depth() {
+        // A room of 0.5 m cells: the robot's centre at x 0.75 m, facing east, so the left
+        // eye (0.2 m ahead) sees the east wall (x 3.0 m) 2.05 m ahead in the middle bins.
+        let map = GridMap::parse("@cell_m 0.5\n#######\n#>....#\n#.....#\n#######\n", "room")
+            .expect("a valid map");
+        let robot = map.start_pose();
+        let rig = StereoRig::qvga();
+        let scan = ObstacleScan {
+            tan_half_fov: 0.5,
+            ..ObstacleScan::default()
+        };
+        let depths = true_scan_depths(&map, &rig, &robot, &scan);
+        for i in [SCAN_BINS / 2 - 1, SCAN_BINS / 2] {
+            assert!((depths[i] - 2.05).abs() < 0.01, "bin {i}: {}", depths[i]);
+        }
+        // Every bin sees a wall, none nearer than the camera's distance to the side walls.
+        assert!(depths.iter().all(|&d| d > 0.2 && d < 2.1), "{depths:?}");
     }
 }

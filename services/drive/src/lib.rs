@@ -324,6 +324,17 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
                         .collect::<Vec<_>>()
                         .join(" ")
                 );
+                // The same bins' depths from the true pose of the frame (the left eye).
+                let truth =
+                    diagnose::true_scan_depths(world.map(), world.rig(), &world.pose_at(t), sc);
+                eprintln!(
+                    "truth {t:6.2} {}",
+                    truth
+                        .iter()
+                        .map(|r| format!("{r:.3}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                );
             }
         }
         if let Some(_at) = std::env::var("HVS_DRIVE_MAP_AT")

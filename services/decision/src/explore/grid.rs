@@ -206,19 +206,21 @@ impl OccupancyGrid {
     }
 
     /// The scan bins the grid trusts, as robot-frame points `(ahead_m, left_m)` with their
-    /// distance from the camera: not left of `first_bin`, and not a stray point (one whose
-    /// neighbouring bins both disagree with it).
+    /// distance from the camera: not left of `first_bin`, and not a stray point (one that
+    /// lies in no run of `support_run_bins` consecutive bins agreeing with its depth).
     fn trusted_bins(&self, scan: &ObstacleScan, camera_forward_m: f64) -> Vec<((f64, f64), f64)> {
         let r = &scan.range_m;
+        let run = self.cfg.support_run_bins.max(2) as usize;
         let supported = |i: usize| {
             let d = f64::from(r[i]);
-            [i.checked_sub(1), (i + 1 < SCAN_BINS).then_some(i + 1)]
-                .into_iter()
-                .flatten()
-                .any(|j| {
-                    let n = f64::from(r[j]);
-                    n > 0.0 && (n - d).abs() <= self.cfg.support_share * d + self.cfg.support_m
-                })
+            let agrees = |j: usize| {
+                let n = f64::from(r[j]);
+                n > 0.0 && (n - d).abs() <= self.cfg.support_share * d + self.cfg.support_m
+            };
+            // Every window of `run` bins that holds bin i.
+            (i.saturating_sub(run - 1)..=i)
+                .filter(|&start| start + run <= SCAN_BINS)
+                .any(|start| (start..start + run).all(|j| j == i || agrees(j)))
         };
         let mut out = Vec::with_capacity(SCAN_BINS);
         for (i, &range_m) in r.iter().enumerate().skip(self.first_bin) {
@@ -395,6 +397,27 @@ impl OccupancyGrid {
         });
     }
 
+    /// Forgets the cells whose centre lies within `radius_m` of `(x_m, y_m)`: they become
+    /// unknown, walls and bumps too (their scan-point counts stay, for the traces).
+    pub fn forget_disc(&mut self, (x_m, y_m): (f64, f64), radius_m: f64) {
+        let Some((c0, r0)) = self.cell_of(x_m, y_m) else {
+            return;
+        };
+        let k = (radius_m / self.cfg.cell_m).ceil() as i64 + 1;
+        for dr in -k..=k {
+            for dc in -k..=k {
+                let Some(cell) = self.offset((c0, r0), dc, dr) else {
+                    continue;
+                };
+                let (cx, cy) = self.centre(cell);
+                if (cx - x_m).hypot(cy - y_m) <= radius_m {
+                    let now = f64::from(self.log_odds(cell));
+                    self.update(cell, -now);
+                }
+            }
+        }
+    }
+
     /// Whether a cell index is inside the grid after an offset.
     pub fn offset(&self, (c, r): CellIndex, dc: i64, dr: i64) -> Option<CellIndex> {
         let (c, r) = (c as i64 + dc, r as i64 + dr);
@@ -475,6 +498,31 @@ mod tests {
         assert_eq!(kept.state_at(1.05, 0.03), CellState::Occupied);
         assert_eq!(kept.state_at(1.2, -0.4), CellState::Free);
         assert_eq!(kept.state_at(0.5, 0.1), CellState::Free);
+    }
+
+    #[test]
+    fn a_bin_is_trusted_only_inside_a_run_of_agreeing_bins() {
+        // Bins 10-11 (two) and 20-22 (three) range a wall at 1 m; bin 30 ranges 1 m alone.
+        let mut scan = wall_scan(0.0);
+        for i in [10, 11, 20, 21, 22, 30] {
+            scan.range_m[i] = 1.0;
+        }
+        let trusted = |scan: &ObstacleScan, support_run_bins: u32| {
+            let grid = OccupancyGrid::new(GridConfig {
+                support_run_bins,
+                ..GridConfig::default()
+            });
+            grid.trusted_bins(scan, 0.0).len()
+        };
+        // One agreeing neighbour is enough by default: the pair and the three, not bin 30.
+        assert_eq!(trusted(&scan, 2), 5);
+        // A run of three: only the three.
+        assert_eq!(trusted(&scan, 3), 3);
+        assert_eq!(trusted(&scan, 4), 0);
+        // A neighbour at another depth breaks the run.
+        scan.range_m[21] = 1.5;
+        assert_eq!(trusted(&scan, 3), 0);
+        assert_eq!(trusted(&scan, 2), 2);
     }
 
     #[test]

@@ -91,6 +91,8 @@ pub struct ExploreStatus {
     pub redraws: u64,
     /// Plans that found a frontier only with `[nav.costmap] fallback_clearance_m`.
     pub tight_plans: u64,
+    /// Times the grid around the robot was forgotten (`[nav.recovery] clear_radius_m`).
+    pub forgets: u64,
     /// No reachable frontier is left.
     pub done: bool,
 }
@@ -862,6 +864,15 @@ impl Explorer {
                 input.now_ns.saturating_sub(t) as f64 * 1e-9
             });
             if since >= self.cfg.frontier.retry_s {
+                // No frontier reachable for `retry_s`: forget what closes the way.
+                let radius_m = self.cfg.recovery.clear_radius_m;
+                if radius_m > 0.0 && closed_for_s >= self.cfg.frontier.retry_s {
+                    self.edit(GridEdit::Forget {
+                        centre_m: (pose.x_m, pose.y_m),
+                        radius_m,
+                    });
+                    self.status.forgets += 1;
+                }
                 self.last_retry_ns = Some(input.now_ns);
                 self.blacklist.clear();
                 self.looked.clear();
@@ -983,6 +994,35 @@ mod tests {
         assert!(!e.status().done);
         // The search after it tries the usual clearance first again.
         assert!(!e.search_tight);
+    }
+
+    #[test]
+    fn the_grid_around_a_robot_with_no_reachable_frontier_is_forgotten_after_retry_s() {
+        let closed = |clear_radius_m: f64| {
+            let mut e = explorer_in_a_narrow_corridor(CostmapConfig::default().clearance_m);
+            e.cfg.recovery.clear_radius_m = clear_radius_m;
+            e
+        };
+        let retry_ns = (NavConfig::default().frontier.retry_s * 1e9) as u64;
+        // Off: the walls stay whatever the wait.
+        let mut e = closed(0.0);
+        replan_in_corridor(&mut e, 0);
+        replan_in_corridor(&mut e, retry_ns);
+        assert_eq!(e.status().forgets, 0);
+        assert_eq!(e.grid.state_at(0.3, 0.25), CellState::Occupied);
+        // On: the first search that finds nothing forgets nothing (a look around may mend
+        // it) ...
+        let mut e = closed(1.0);
+        replan_in_corridor(&mut e, 0);
+        assert!(e.status().done);
+        assert_eq!(e.status().forgets, 0);
+        assert_eq!(e.grid.state_at(0.3, 0.25), CellState::Occupied);
+        // ... nothing reachable for `retry_s` forgets the walls within 1 m, not beyond.
+        replan_in_corridor(&mut e, retry_ns);
+        assert_eq!(e.status().forgets, 1);
+        assert_eq!(e.grid.state_at(0.3, 0.25), CellState::Unknown);
+        assert_eq!(e.grid.state_at(-0.55, 0.0), CellState::Unknown);
+        assert_eq!(e.grid.state_at(1.4, 0.25), CellState::Occupied);
     }
 
     #[test]

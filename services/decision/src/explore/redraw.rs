@@ -49,6 +49,13 @@ pub enum GridEdit {
         /// Robot-frame extent to the left, metres.
         left_m: (f64, f64),
     },
+    /// The cells near a point forgotten ([`OccupancyGrid::forget_disc`]).
+    Forget {
+        /// The disc's centre, grid frame, metres.
+        centre_m: (f64, f64),
+        /// Its radius, metres.
+        radius_m: f64,
+    },
 }
 
 impl GridEdit {
@@ -66,6 +73,7 @@ impl GridEdit {
                 ahead_m,
                 left_m,
             } => grid.mark_bump(pose, *ahead_m, *left_m),
+            GridEdit::Forget { centre_m, radius_m } => grid.forget_disc(*centre_m, *radius_m),
         }
     }
 }
@@ -88,6 +96,10 @@ enum Logged {
         pose: DeadReckonedPose,
         ahead_m: (f64, f64),
         left_m: (f64, f64),
+    },
+    Forget {
+        centre_m: (f64, f64),
+        radius_m: f64,
     },
 }
 
@@ -122,6 +134,10 @@ impl EditLog {
                 pose: *pose,
                 ahead_m: *ahead_m,
                 left_m: *left_m,
+            },
+            GridEdit::Forget { centre_m, radius_m } => Logged::Forget {
+                centre_m: *centre_m,
+                radius_m: *radius_m,
             },
             GridEdit::Scan(points) => {
                 let (h, r) = (self.hits.len(), self.rays.len());
@@ -212,6 +228,9 @@ impl EditLog {
                 ahead_m,
                 left_m,
             } => grid.mark_bump(&pose(p), *ahead_m, *left_m),
+            Logged::Forget { centre_m, radius_m } => {
+                grid.forget_disc(turn.point(*centre_m), *radius_m);
+            }
             Logged::Scan { camera, hits, rays } => {
                 let seen_from = turn.point(*camera);
                 let (s, c) = view_rad.sin_cos();

@@ -346,7 +346,7 @@ impl Navigator {
         if let Some(e) = &self.explorer {
             let s = e.status();
             return format!(
-                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}{}{}",
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}{}{}{}",
                 e.goal_m()
                     .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
                 s.plans,
@@ -364,6 +364,11 @@ impl Navigator {
                 },
                 if s.redraws > 0 {
                     format!(" redrawn {}", s.redraws)
+                } else {
+                    String::new()
+                },
+                if s.forgets > 0 {
+                    format!(" forgot {}", s.forgets)
                 } else {
                     String::new()
                 },

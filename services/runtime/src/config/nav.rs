@@ -57,6 +57,10 @@ pub struct GridConfig {
     pub support_share: f64,
     /// ... plus this, metres.
     pub support_m: f64,
+    /// ... and lies in a run of at least this many consecutive bins that all agree with
+    /// its depth (2: one neighbour agrees). A longer run drops the bins at a surface's
+    /// ends, where block matching on a plain wall most often ranges past the wall.
+    pub support_run_bins: u32,
     /// A ray crossing an occupied cell lowers it by this share of `miss_log_odds` only (a
     /// wall fades slowly: a few stray rays do not open it).
     pub occupied_miss_share: f64,
@@ -78,6 +82,7 @@ impl Default for GridConfig {
             ray_clearance_m: 0.0,
             support_share: 0.1,
             support_m: 0.05,
+            support_run_bins: 2,
             occupied_miss_share: 0.25,
         }
     }
@@ -101,6 +106,12 @@ impl GridConfig {
                 ("ray_clearance_m", self.ray_clearance_m, 0.0, 1.0),
                 ("support_share", self.support_share, 0.0, 1.0),
                 ("support_m", self.support_m, 0.0, 1.0),
+                (
+                    "support_run_bins",
+                    f64::from(self.support_run_bins),
+                    2.0,
+                    8.0,
+                ),
                 ("occupied_miss_share", self.occupied_miss_share, 0.0, 1.0),
             ],
         )?;
@@ -615,6 +626,11 @@ pub struct RecoveryConfig {
     /// After a stalled turn, a bump is marked this far beside the footprint's side, metres
     /// (inside the circle the corners sweep: the half-diagonal is 0.11 m beyond the side).
     pub turn_bump_gap_m: f64,
+    /// With no reachable frontier for `[nav.frontier] retry_s`, the grid within this
+    /// distance of the robot is forgotten (made unknown, bumps too) before the look around,
+    /// as Nav2's clear-costmap recovery does: a wall drawn wrongly (drift, a stray match, a
+    /// bump) that closes the way is seen again or not at all, metres (0: off).
+    pub clear_radius_m: f64,
 }
 
 impl Default for RecoveryConfig {
@@ -635,6 +651,7 @@ impl Default for RecoveryConfig {
             behaviour_limit_s: 5.0,
             bump_gap_m: 0.12,
             turn_bump_gap_m: 0.06,
+            clear_radius_m: 1.0,
         }
     }
 }
@@ -659,6 +676,7 @@ impl RecoveryConfig {
                 ("behaviour_limit_s", self.behaviour_limit_s, 0.5, 600.0),
                 ("bump_gap_m", self.bump_gap_m, 0.0, 1.0),
                 ("turn_bump_gap_m", self.turn_bump_gap_m, 0.0, 1.0),
+                ("clear_radius_m", self.clear_radius_m, 0.0, 5.0),
             ],
         )
     }
