@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 """Compares the obstacle scan with the true walls: reads the `scan` and `truth` lines of
 `HVS_DRIVE_TRACE=1 HVS_DRIVE_TRACE_SCAN=1 hvs sim drive` (stderr) and counts, over the bins the
-explorer's grid would keep (a run of RUN bins agreeing within 10 % + 5 cm, [nav.grid]
-support_*), those that range past the true wall (deeper than 1.1 x the truth + 5 cm: their ray
+explorer's grid would keep (not left of FIRST_BIN, by default 11 = ceil(max_disp 55 * 64 / 320),
+and in a run of RUN bins agreeing within 10 % + 5 cm: [nav.grid] support_share and support_m at
+their defaults), those that range past the true wall (deeper than 1.1 x the truth + 5 cm: their ray
 clears cells of the wall), those that range short of it, and the rest. Frames taken while the
 true heading turned more than 1 degree since the last one are left out (the grid does not add
 them either), as are bins whose true wall lies beyond 2.5 m.
 
-    scripts/scan-vs-truth.py TRACE...      (RUN=2 3 by default: the grid's default and a stricter one)
+    [RUN="2 3"] [FIRST_BIN=11] scripts/scan-vs-truth.py TRACE...
+    (RUN: the run lengths to count for; by default the grid's default, 2, and a stricter 3)
 """
 import math
 import os
@@ -15,6 +17,7 @@ import re
 import sys
 
 RUNS = [int(r) for r in os.environ.get("RUN", "2 3").split()]
+FIRST_BIN = int(os.environ.get("FIRST_BIN", "11"))
 
 
 def agrees(a, b):
@@ -51,7 +54,7 @@ def main(paths):
                     if turn > 1.0:
                         continue
                     for i, (r, d) in enumerate(zip(scan, truth)):
-                        if r <= 0 or d <= 0 or d > 2.5:
+                        if i < FIRST_BIN or r <= 0 or d <= 0 or d > 2.5:
                             continue
                         for run in RUNS:
                             if not trusted(scan, i, run):

@@ -1,14 +1,20 @@
 #!/usr/bin/env python3
 """Sorts the collisions of `HVS_DRIVE_TRACE=1 hvs sim drive` traces (stderr) by what the robot
 was commanded in the frame before, which footprint end touched, the grid's state at the
-touching points and whether their cells ever had a scan point; prints the nearest occupied
+touching points and whether their cells ever had a scan point (an end: a touching point in the footprint's front or
+rear quarter of its length; "side" when all lie between); prints the nearest occupied
 cell's distance per collision (how far aside the grid holds the wall it touched).
 
-    scripts/trace-collisions.py TRACE...
+    [HALF_LENGTH_M=0.249] scripts/trace-collisions.py TRACE...
 """
 import collections
 import re
+import os
 import sys
+
+# The collision line's rim runs from -HALF_LENGTH_M to +HALF_LENGTH_M along the footprint: half
+# [robot] length_m (0.438 in config/sim.toml) plus the trace's 0.03 m margin.
+HALF_LENGTH_M = float(os.environ.get("HALF_LENGTH_M", "0.249"))
 
 
 def main(paths):
@@ -30,9 +36,9 @@ def main(paths):
                     ]
                     if not points:
                         continue
-                    front = any(a > 0 for a, *_ in points)
-                    rear = any(a < 0 for a, *_ in points)
-                    end = "both" if front and rear else "front" if front else "rear"
+                    front = any(a > 0.5 * HALF_LENGTH_M for a, *_ in points)
+                    rear = any(a < -0.5 * HALF_LENGTH_M for a, *_ in points)
+                    end = "both" if front and rear else "front" if front else "rear" if rear else "side"
                     states = "/".join(sorted({s for _, s, _, _ in points}))
                     seen = "had a point" if any(h > 0 for _, _, h, _ in points) else "never a point"
                     kinds[(command, end, states, seen)] += 1

@@ -338,5 +338,13 @@ mod tests {
         }
         // Every bin sees a wall, none nearer than the camera's distance to the side walls.
         assert!(depths.iter().all(|&d| d > 0.2 && d < 2.1), "{depths:?}");
+        // Bin 0 looks left (26 degrees): the north wall, 0.22 m beside the eye, is met at a
+        // depth of 0.45 m; bin 63 looks right at the south wall, 0.78 m away: 1.58 m.
+        assert!((depths[0] - 0.45).abs() < 0.02, "{}", depths[0]);
+        assert!(
+            (depths[SCAN_BINS - 1] - 1.585).abs() < 0.01,
+            "{}",
+            depths[SCAN_BINS - 1]
+        );
     }
 }

@@ -864,7 +864,9 @@ impl Explorer {
                 input.now_ns.saturating_sub(t) as f64 * 1e-9
             });
             if since >= self.cfg.frontier.retry_s {
-                // No frontier reachable for `retry_s`: forget what closes the way.
+                // No frontier found with the usual clearance for `retry_s` (plans made with
+                // the fallback clearance meanwhile do not count) and none now: forget what
+                // closes the way.
                 let radius_m = self.cfg.recovery.clear_radius_m;
                 if radius_m > 0.0 && closed_for_s >= self.cfg.frontier.retry_s {
                     self.edit(GridEdit::Forget {
