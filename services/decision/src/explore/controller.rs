@@ -115,6 +115,14 @@ impl FootprintCheck {
         self.turn_radius_m
     }
 
+    /// How far from the robot's centre the turn check looks for walls, either way, metres:
+    /// the corners' circle moved by the turn's pivot, plus `turn_margin_m`.
+    pub fn turn_reach_m(&self) -> f64 {
+        self.turn_radius_m
+            + self.pivot_left_m.0.abs().max(self.pivot_left_m.1.abs())
+            + self.turn_margin_m
+    }
+
     /// Counts the samples of the robot-frame rectangle `ahead` x `left` (metres) by state:
     /// (occupied, unknown, all).
     fn rect_count(

@@ -398,8 +398,9 @@ impl OccupancyGrid {
     }
 
     /// Forgets the cells whose centre lies within `radius_m` of `(x_m, y_m)`: they become
-    /// unknown, walls and bumps too (their scan-point counts stay, for the traces).
-    pub fn forget_disc(&mut self, (x_m, y_m): (f64, f64), radius_m: f64) {
+    /// unknown, walls and bumps too (their scan-point counts stay, for the traces), except
+    /// the occupied cells within `keep_occupied_m` (the walls a turn in place there checks).
+    pub fn forget_disc(&mut self, (x_m, y_m): (f64, f64), radius_m: f64, keep_occupied_m: f64) {
         let Some((c0, r0)) = self.cell_of(x_m, y_m) else {
             return;
         };
@@ -410,8 +411,10 @@ impl OccupancyGrid {
                     continue;
                 };
                 let (cx, cy) = self.centre(cell);
-                if (cx - x_m).hypot(cy - y_m) <= radius_m {
-                    let now = f64::from(self.log_odds(cell));
+                let d = (cx - x_m).hypot(cy - y_m);
+                let now = f64::from(self.log_odds(cell));
+                let kept = d <= keep_occupied_m && self.state(cell) == CellState::Occupied;
+                if d <= radius_m && !kept && now != 0.0 {
                     self.update(cell, -now);
                 }
             }

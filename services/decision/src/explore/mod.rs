@@ -181,6 +181,9 @@ pub struct Explorer {
     /// Since when searches with the usual clearance have found no frontier (`None`: the
     /// last one found one).
     closed_since_ns: Option<u64>,
+    /// Since when no search, with either clearance, has found a frontier (None: the last
+    /// one did).
+    unreachable_since_ns: Option<u64>,
     progress: ProgressChecker,
     recovery: Option<Recovery>,
     recoveries_for_goal: u32,
@@ -236,6 +239,7 @@ impl Explorer {
             replan_now: true,
             search_tight: false,
             closed_since_ns: None,
+            unreachable_since_ns: None,
             progress: ProgressChecker::default(),
             recovery: None,
             recoveries_for_goal: 0,
@@ -854,6 +858,14 @@ impl Explorer {
         } else if found.chosen.is_none() {
             self.closed_since_ns.get_or_insert(input.now_ns);
         }
+        let unreachable_for_s = self
+            .unreachable_since_ns
+            .map_or(0.0, |t| input.now_ns.saturating_sub(t) as f64 * 1e-9);
+        if found.chosen.is_some() {
+            self.unreachable_since_ns = None;
+        } else {
+            self.unreachable_since_ns.get_or_insert(input.now_ns);
+        }
         let fcfg = self.cfg.frontier;
         let Some((f, goal_m, path)) = found.chosen else {
             self.plan = None;
@@ -864,14 +876,15 @@ impl Explorer {
                 input.now_ns.saturating_sub(t) as f64 * 1e-9
             });
             if since >= self.cfg.frontier.retry_s {
-                // No frontier found with the usual clearance for `retry_s` (plans made with
-                // the fallback clearance meanwhile do not count) and none now: forget what
-                // closes the way.
+                // No frontier found by any search for `retry_s`: forget what closes the way,
+                // but not the walls the look around's turns are checked against.
                 let radius_m = self.cfg.recovery.clear_radius_m;
-                if radius_m > 0.0 && closed_for_s >= self.cfg.frontier.retry_s {
+                if radius_m > 0.0 && unreachable_for_s >= self.cfg.frontier.retry_s {
+                    let keep_occupied_m = self.controller.footprint().turn_reach_m();
                     self.edit(GridEdit::Forget {
                         centre_m: (pose.x_m, pose.y_m),
                         radius_m,
+                        keep_occupied_m,
                     });
                     self.status.forgets += 1;
                 }
@@ -1019,12 +1032,27 @@ mod tests {
         assert!(e.status().done);
         assert_eq!(e.status().forgets, 0);
         assert_eq!(e.grid.state_at(0.3, 0.25), CellState::Occupied);
-        // ... nothing reachable for `retry_s` forgets the walls within 1 m, not beyond.
+        // ... nothing reachable for `retry_s` forgets the walls within 1 m, not beyond, and
+        // keeps those the turn check looks at (within its reach of the robot).
+        let reach_m = e.controller.footprint().turn_reach_m();
+        assert!(reach_m > 0.3 && reach_m < 0.5, "{reach_m}");
         replan_in_corridor(&mut e, retry_ns);
         assert_eq!(e.status().forgets, 1);
-        assert_eq!(e.grid.state_at(0.3, 0.25), CellState::Unknown);
+        assert_eq!(e.grid.state_at(0.15, 0.25), CellState::Occupied);
+        assert_eq!(e.grid.state_at(0.8, 0.25), CellState::Unknown);
         assert_eq!(e.grid.state_at(-0.55, 0.0), CellState::Unknown);
         assert_eq!(e.grid.state_at(1.4, 0.25), CellState::Occupied);
+        // A frontier found with the fallback clearance (the default) counts as found: the
+        // corridor's end is reached that way, and nothing is forgotten.
+        let mut e = explorer_in_a_narrow_corridor(0.0);
+        e.cfg.recovery.clear_radius_m = 1.0;
+        let wait_ns = retry_ns.max((e.cfg.costmap.fallback_after_s * 1e9) as u64);
+        replan_in_corridor(&mut e, 0);
+        replan_in_corridor(&mut e, wait_ns);
+        replan_in_corridor(&mut e, wait_ns + 66_000_000);
+        assert!(e.goal_m().is_some());
+        assert_eq!(e.status().forgets, 0);
+        assert_eq!(e.grid.state_at(0.8, 0.25), CellState::Occupied);
     }
 
     #[test]

@@ -55,6 +55,8 @@ pub enum GridEdit {
         centre_m: (f64, f64),
         /// Its radius, metres.
         radius_m: f64,
+        /// Occupied cells this near the centre are kept, metres.
+        keep_occupied_m: f64,
     },
 }
 
@@ -73,7 +75,11 @@ impl GridEdit {
                 ahead_m,
                 left_m,
             } => grid.mark_bump(pose, *ahead_m, *left_m),
-            GridEdit::Forget { centre_m, radius_m } => grid.forget_disc(*centre_m, *radius_m),
+            GridEdit::Forget {
+                centre_m,
+                radius_m,
+                keep_occupied_m,
+            } => grid.forget_disc(*centre_m, *radius_m, *keep_occupied_m),
         }
     }
 }
@@ -100,6 +106,7 @@ enum Logged {
     Forget {
         centre_m: (f64, f64),
         radius_m: f64,
+        keep_occupied_m: f64,
     },
 }
 
@@ -135,9 +142,14 @@ impl EditLog {
                 ahead_m: *ahead_m,
                 left_m: *left_m,
             },
-            GridEdit::Forget { centre_m, radius_m } => Logged::Forget {
+            GridEdit::Forget {
+                centre_m,
+                radius_m,
+                keep_occupied_m,
+            } => Logged::Forget {
                 centre_m: *centre_m,
                 radius_m: *radius_m,
+                keep_occupied_m: *keep_occupied_m,
             },
             GridEdit::Scan(points) => {
                 let (h, r) = (self.hits.len(), self.rays.len());
@@ -228,8 +240,12 @@ impl EditLog {
                 ahead_m,
                 left_m,
             } => grid.mark_bump(&pose(p), *ahead_m, *left_m),
-            Logged::Forget { centre_m, radius_m } => {
-                grid.forget_disc(turn.point(*centre_m), *radius_m);
+            Logged::Forget {
+                centre_m,
+                radius_m,
+                keep_occupied_m,
+            } => {
+                grid.forget_disc(turn.point(*centre_m), *radius_m, *keep_occupied_m);
             }
             Logged::Scan { camera, hits, rays } => {
                 let seen_from = turn.point(*camera);

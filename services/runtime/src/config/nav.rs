@@ -626,11 +626,11 @@ pub struct RecoveryConfig {
     /// After a stalled turn, a bump is marked this far beside the footprint's side, metres
     /// (inside the circle the corners sweep: the half-diagonal is 0.11 m beyond the side).
     pub turn_bump_gap_m: f64,
-    /// With no frontier found with the usual clearance for `[nav.frontier] retry_s` and none
-    /// found now, the grid within this distance of the robot is forgotten (made unknown, bumps
-    /// too) before the look around,
-    /// as Nav2's clear-costmap recovery does: a wall drawn wrongly (drift, a stray match, a
-    /// bump) that closes the way is seen again or not at all, metres (0: off).
+    /// With no frontier found by any search (either clearance) for `[nav.frontier] retry_s`,
+    /// the grid within this distance of the robot is forgotten (made unknown, bumps too;
+    /// the walls within the turn check's reach are kept) before the look around, as Nav2's
+    /// clear-costmap recovery does: a wall drawn wrongly (drift, a stray match, a bump) that
+    /// closes the way is seen again or not at all, metres (0: off).
     pub clear_radius_m: f64,
 }
 
