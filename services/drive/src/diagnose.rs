@@ -240,6 +240,15 @@ fn picture(scene: &Scene<'_>, half_m: f64) -> String {
     out
 }
 
+/// Depths in metres, millimetre precision, space-separated (the `scan` and `truth` lines).
+pub fn depths_text<T: std::fmt::Display>(depths: &[T]) -> String {
+    depths
+        .iter()
+        .map(|r| format!("{r:.3}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 /// The depth (along the optical axis, metres) of the nearest wall along each bin's viewing
 /// direction of `scan`, cast from the left eye of the robot at `robot` on the true map (0:
 /// nothing hit): what a perfect matcher would give for the bin's middle column (the

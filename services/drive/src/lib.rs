@@ -318,23 +318,12 @@ pub fn drive(config: &HvsConfig, opts: &DriveOptions) -> Result<DriveReport, Dri
                 eprintln!(
                     "scan {t:6.2} {} {}",
                     sc.tan_half_fov,
-                    sc.range_m
-                        .iter()
-                        .map(|r| format!("{r:.3}"))
-                        .collect::<Vec<_>>()
-                        .join(" ")
+                    diagnose::depths_text(&sc.range_m)
                 );
                 // The same bins' depths from the true pose of the frame (the left eye).
                 let truth =
                     diagnose::true_scan_depths(world.map(), world.rig(), &world.pose_at(t), sc);
-                eprintln!(
-                    "truth {t:6.2} {}",
-                    truth
-                        .iter()
-                        .map(|r| format!("{r:.3}"))
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                );
+                eprintln!("truth {t:6.2} {}", diagnose::depths_text(&truth));
             }
         }
         if let Some(_at) = std::env::var("HVS_DRIVE_MAP_AT")

@@ -118,9 +118,14 @@ impl FootprintCheck {
     /// How far from the robot's centre the turn check looks for walls, either way, metres:
     /// the corners' circle moved by the turn's pivot, plus `turn_margin_m`.
     pub fn turn_reach_m(&self) -> f64 {
-        self.turn_radius_m
-            + self.pivot_left_m.0.abs().max(self.pivot_left_m.1.abs())
-            + self.turn_margin_m
+        self.reach_m(self.pivot_left_m.0)
+            .max(self.reach_m(self.pivot_left_m.1))
+    }
+
+    /// The turn check's radius about the robot's centre for a turn whose centre lies
+    /// `pivot_m` to the left, metres.
+    fn reach_m(&self, pivot_m: f64) -> f64 {
+        self.turn_radius_m + pivot_m.abs() + self.turn_margin_m
     }
 
     /// Counts the samples of the robot-frame rectangle `ahead` x `left` (metres) by state:
@@ -196,7 +201,7 @@ impl FootprintCheck {
         } else {
             self.pivot_left_m.1
         };
-        let r = self.turn_radius_m + pivot.abs() + self.turn_margin_m;
+        let r = self.reach_m(pivot);
         let step = 0.5 * grid.cell_m();
         let n = (r / step).ceil() as i64;
         let mut nearest: Option<(f64, f64)> = None;

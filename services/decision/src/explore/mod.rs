@@ -156,6 +156,11 @@ impl FrontMemory {
 /// texture) fills it: nothing in view, or more of the middle third's bins scattered
 /// ([`hvs_shared::messages::SCAN_SCATTERED`]) than ranged; "nothing": fewer than `min_bins`
 /// valid bins.
+/// Seconds from `since_ns` to `now_ns` (0 when `now_ns` is earlier), both CLOCK_MONOTONIC ns.
+pub(crate) fn elapsed_s(since_ns: u64, now_ns: u64) -> f64 {
+    now_ns.saturating_sub(since_ns) as f64 * 1e-9
+}
+
 fn blind(scan: &ObstacleScan, min_bins: u32) -> bool {
     let (valid, scattered) = scan.valid_and_scattered(SCAN_BINS / 3..2 * SCAN_BINS / 3);
     scan.valid_bins() < min_bins as usize || scattered > valid
@@ -627,9 +632,9 @@ impl Explorer {
             self.controller.reset();
             self.replan_now = true;
         }
-        let due = self.last_plan_ns.is_none_or(|t| {
-            input.now_ns.saturating_sub(t) as f64 * 1e-9 >= self.cfg.frontier.replan_s
-        });
+        let due = self
+            .last_plan_ns
+            .is_none_or(|t| elapsed_s(t, input.now_ns) >= self.cfg.frontier.replan_s);
         let reached = self.plan.as_ref().is_some_and(|p| {
             (p.goal_m.0 - pose.x_m).hypot(p.goal_m.1 - pose.y_m) < self.cfg.frontier.reached_m
         });
@@ -839,7 +844,7 @@ impl Explorer {
         self.status.frontiers = found.frontiers;
         let closed_for_s = self
             .closed_since_ns
-            .map_or(0.0, |t| input.now_ns.saturating_sub(t) as f64 * 1e-9);
+            .map_or(0.0, |t| elapsed_s(t, input.now_ns));
         if found.chosen.is_none()
             && !tight
             && fallback < self.cfg.costmap.clearance_m
@@ -860,7 +865,7 @@ impl Explorer {
         }
         let unreachable_for_s = self
             .unreachable_since_ns
-            .map_or(0.0, |t| input.now_ns.saturating_sub(t) as f64 * 1e-9);
+            .map_or(0.0, |t| elapsed_s(t, input.now_ns));
         if found.chosen.is_some() {
             self.unreachable_since_ns = None;
         } else {
@@ -872,9 +877,9 @@ impl Explorer {
             self.status.done = true;
             // Everything left was given up on, or the map shows no way out (a wall seen
             // wrongly can close it): look around and try every goal again, now and then.
-            let since = self.last_retry_ns.map_or(f64::INFINITY, |t| {
-                input.now_ns.saturating_sub(t) as f64 * 1e-9
-            });
+            let since = self
+                .last_retry_ns
+                .map_or(f64::INFINITY, |t| elapsed_s(t, input.now_ns));
             if since >= self.cfg.frontier.retry_s {
                 // No frontier found by any search for `retry_s`: forget what closes the way,
                 // but not the walls the look around's turns are checked against.

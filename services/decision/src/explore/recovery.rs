@@ -45,7 +45,7 @@ impl ProgressChecker {
                 if new_goal {
                     self.anchor = Some((goal_cost_m, at, since));
                 }
-                now_ns.saturating_sub(since) as f64 * 1e-9 > cfg.progress_timeout_s
+                super::elapsed_s(since, now_ns) > cfg.progress_timeout_s
             }
         }
     }

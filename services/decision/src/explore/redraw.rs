@@ -491,7 +491,7 @@ impl RedrawLog {
         }
         self.recent
             .push_back((now_ns, self.corrected_rad, self.edits.len()));
-        let elapsed_s = now_ns.saturating_sub(self.opened_ns) as f64 * 1e-9;
+        let elapsed_s = super::elapsed_s(self.opened_ns, now_ns);
         match &mut self.phase {
             Phase::Blind(arc) => {
                 let turned_rad = arc.advance(pose.heading_rad);
