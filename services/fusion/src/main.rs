@@ -83,6 +83,14 @@ struct HiSide {
 }
 
 impl HiSide {
+    /// Forgets the results and the last map id of an old frame numbering: the capture
+    /// restarted, so frame ids start again and a replayed frame's named result, or whether
+    /// it may still come, must be judged in the new numbering.
+    fn restart(&mut self) {
+        self.results.clear();
+        self.last_map_id = None;
+    }
+
     /// Computes the ranges of every map whose frame is here (in the order they came; each
     /// map settles before the next is queued, so none is pushed out while its frame waits).
     fn take_maps(
@@ -95,6 +103,9 @@ impl HiSide {
             // Frames first, each time: a frame queued meanwhile settles its waiting map
             // before the next map can push that one out.
             hold_frames(frames, &mut self.held)?;
+            if self.results.follow_numbering(self.held.numbering()) {
+                self.restart();
+            }
             let received = maps.receive()?;
             let more = received.is_some();
             if let Some(map) = received {
@@ -151,6 +162,7 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     };
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
     let mut held_lo = HeldFrames::new(HELD_FRAMES, frame_id);
+    let mut lo_numbering = held_lo.numbering();
     let mut waiting_lo = WaitingMaps::new(WAITING_MAPS, frame_id);
     let mut lo_path = FusionPath::new(&rt.config, 320, 240, RangeSource::Lo);
     let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
@@ -174,6 +186,11 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         disp_lo.clear_events();
         loop {
             hold_frames(&frames_lo, &mut held_lo)?;
+            if held_lo.numbering() != lo_numbering {
+                // The capture restarted: its 640x480 frames are numbered again too.
+                lo_numbering = held_lo.numbering();
+                hi.restart();
+            }
             let received = disp_lo.receive()?;
             let more = received.is_some();
             if let Some(map) = received {

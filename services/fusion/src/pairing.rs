@@ -226,11 +226,14 @@ pub struct HiResult<R> {
     pub result: R,
 }
 
-/// The newest long-range results, oldest first, at most `capacity`.
+/// The newest long-range results, oldest first, at most `capacity`, all of one frame
+/// numbering (a restarted capture numbers its frames from 1 again, and a replayed frame that
+/// names result N must not get the old numbering's N).
 #[derive(Debug)]
 pub struct HiResults<R> {
     results: VecDeque<HiResult<R>>,
     capacity: usize,
+    numbering: u64,
 }
 
 impl<R> HiResults<R> {
@@ -239,7 +242,25 @@ impl<R> HiResults<R> {
         Self {
             results: VecDeque::with_capacity(capacity.max(1)),
             capacity: capacity.max(1),
+            numbering: 0,
         }
+    }
+
+    /// Follows the 640x480 frames' numbering ([`HeldFrames::numbering`]): when it changed
+    /// (the frame ids started again), every result kept is dropped. True when it changed.
+    pub fn follow_numbering(&mut self, numbering: u64) -> bool {
+        if numbering == self.numbering {
+            return false;
+        }
+        self.numbering = numbering;
+        self.results.clear();
+        true
+    }
+
+    /// Drops every result (the 320x240 frames' ids started again: the capture restarted,
+    /// and its 640x480 frames will too).
+    pub fn clear(&mut self) {
+        self.results.clear();
     }
 
     /// Adds the newest result, dropping the oldest when full.
@@ -435,5 +456,32 @@ mod tests {
             "dropped"
         );
         assert_eq!(hi.find(14).map(|h| h.capture_ns), Some(3_000));
+    }
+
+    #[test]
+    fn a_restarted_numbering_drops_the_old_results() {
+        let mut frames = HeldFrames::new(4, |id: &u64| *id);
+        let mut hi = HiResults::new(4);
+        for id in [10, 11] {
+            frames.push(id);
+            assert!(!hi.follow_numbering(frames.numbering()));
+            hi.push(id, id * 1_000, id);
+        }
+        // The capture restarts: its frames are numbered from 1 again.
+        frames.push(1);
+        assert!(hi.follow_numbering(frames.numbering()), "a new numbering");
+        assert!(hi.choose(HiWanted::Named(10), 0, u64::MAX).is_none());
+        assert!(hi.choose(HiWanted::Newest, 11_000, u64::MAX).is_none());
+        hi.push(1, 20_000, 1);
+        assert!(
+            !hi.follow_numbering(frames.numbering()),
+            "the same numbering"
+        );
+        assert_eq!(
+            hi.choose(HiWanted::Named(1), 0, 0).map(|h| h.result),
+            Some(1)
+        );
+        hi.clear();
+        assert!(hi.find(1).is_none());
     }
 }

@@ -401,15 +401,26 @@ impl OccupancyGrid {
     /// unknown, walls and bumps too (their scan-point counts stay, for the traces), except
     /// the occupied cells within `keep_occupied_m` (the walls a turn in place there checks).
     pub fn forget_disc(&mut self, (x_m, y_m): (f64, f64), radius_m: f64, keep_occupied_m: f64) {
-        let Some((c0, r0)) = self.cell_of(x_m, y_m) else {
-            return;
+        // The disc's bounding box in cells, clipped to the grid (the centre itself may lie
+        // off it, the disc's edge still on it).
+        let (half, last, cell_m) = (
+            self.side as f64 * 0.5,
+            self.side as f64 - 1.0,
+            self.cfg.cell_m,
+        );
+        let span = |v_m: f64| {
+            let lo = ((v_m - radius_m) / cell_m + half).floor().max(0.0);
+            let hi = ((v_m + radius_m) / cell_m + half).floor().min(last);
+            (lo, hi)
         };
-        let k = (radius_m / self.cfg.cell_m).ceil() as i64 + 1;
-        for dr in -k..=k {
-            for dc in -k..=k {
-                let Some(cell) = self.offset((c0, r0), dc, dr) else {
-                    continue;
-                };
+        let ((c_lo, c_hi), (r_lo, r_hi)) = (span(x_m), span(y_m));
+        if c_hi < c_lo || r_hi < r_lo {
+            // Wholly off the grid (the clipped range must not wrap to cell 0).
+            return;
+        }
+        for r in r_lo as usize..=r_hi as usize {
+            for c in c_lo as usize..=c_hi as usize {
+                let cell = (c, r);
                 let (cx, cy) = self.centre(cell);
                 let d = (cx - x_m).hypot(cy - y_m);
                 let now = f64::from(self.log_odds(cell));
@@ -471,6 +482,36 @@ mod tests {
             *r = depth_m;
         }
         scan
+    }
+
+    #[test]
+    fn a_disc_whose_centre_lies_off_the_grid_forgets_the_cells_it_covers_on_it() {
+        let mut grid = OccupancyGrid::new(GridConfig {
+            extent_m: 4.0,
+            ..GridConfig::default()
+        });
+        let cell_m = grid.cell_m();
+        let edge_m = 0.5 * grid.side() as f64 * cell_m;
+        let whole = |grid: &mut OccupancyGrid| {
+            let pose = DeadReckonedPose::default();
+            let far = edge_m + 1.0;
+            grid.mark_bump(&pose, (-far, far), (-far, far));
+        };
+        let occupied =
+            |grid: &OccupancyGrid, x_m: f64| grid.state_at(x_m, 0.0) == CellState::Occupied;
+        whole(&mut grid);
+        // Centred 0.2 m east of the grid's east edge, 0.5 m across: the last three
+        // columns go, the fourth from the edge stays.
+        grid.forget_disc((edge_m + 0.2, 0.0), 0.5, 0.0);
+        assert!(!occupied(&grid, edge_m - 0.5 * cell_m));
+        assert!(!occupied(&grid, edge_m - 2.5 * cell_m));
+        assert!(occupied(&grid, edge_m - 3.5 * cell_m));
+        // Wholly off the grid: nothing goes (the clipped range must not wrap to cell 0).
+        whole(&mut grid);
+        grid.forget_disc((-edge_m - 2.0, -edge_m - 2.0), 0.5, 0.0);
+        grid.forget_disc((edge_m + 2.0, edge_m + 2.0), 0.5, 0.0);
+        assert!(occupied(&grid, -edge_m + 0.5 * cell_m));
+        assert!(occupied(&grid, edge_m - 0.5 * cell_m));
     }
 
     #[test]

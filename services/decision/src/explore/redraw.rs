@@ -491,15 +491,16 @@ impl RedrawLog {
         }
         self.recent
             .push_back((now_ns, self.corrected_rad, self.edits.len()));
-        let elapsed_s = super::elapsed_s(self.opened_ns, now_ns);
+        // Until a re-draw is searched for, the log is kept `window_s` at most: a scan that
+        // stays empty (the robot facing a wall, or blind in a dark room), or a correction
+        // that never comes, must not grow it without end.
+        let waiting = matches!(self.phase, Phase::Blind(_) | Phase::Waiting { .. });
+        if waiting && super::elapsed_s(self.opened_ns, now_ns) > self.cfg.window_s {
+            return RedrawStep::Drop;
+        }
         match &mut self.phase {
             Phase::Blind(arc) => {
                 let turned_rad = arc.advance(pose.heading_rad);
-                // A scan that stays empty (the robot facing a wall, or blind in a dark
-                // room) must not grow the log without end.
-                if elapsed_s > self.cfg.window_s {
-                    return RedrawStep::Drop;
-                }
                 if !alignable {
                     return RedrawStep::Keep;
                 }
@@ -510,9 +511,6 @@ impl RedrawLog {
                 RedrawStep::Keep
             }
             Phase::Waiting { turned_rad } => {
-                if elapsed_s > self.cfg.window_s {
-                    return RedrawStep::Drop;
-                }
                 // Only a jump: the corrections of ordinary drift add up to tens of degrees
                 // over minutes (measured: 86 degrees in 120 s on generated maze 2) and say
                 // nothing about the blind turn.
