@@ -19,6 +19,7 @@
 //! state in which the way ahead is open but a side is undecided (its smoothed membership is
 //! inside the fuzzy band): keep going straight until it resolves.
 
+pub mod calibration;
 pub mod explore;
 pub mod local_map;
 pub mod nav_map;

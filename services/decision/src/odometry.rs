@@ -9,7 +9,9 @@
 //! `v = (vl + vr) / 2`, `w = (vr - vl) / track`. Without wheel encoders this is the best the
 //! robot knows about where it went; the visit memory and the turn execution use it.
 
-use hvs_runtime::config::{PulseTable, RobotConfig};
+use hvs_runtime::config::{CalibrationConfig, PulseTable, RobotConfig};
+
+use crate::calibration::HeadingCalibration;
 
 /// PSC pulse range, 2 us units.
 const PW_SPAN: f64 = 1000.0;
@@ -95,6 +97,8 @@ pub struct Odometry {
     pose: DeadReckonedPose,
     distance_m: f64,
     time_ns: Option<u64>,
+    /// The heading's online calibration (`[nav.calibration]`), when on.
+    calibration: Option<HeadingCalibration>,
 }
 
 impl Odometry {
@@ -115,7 +119,27 @@ impl Odometry {
             pose: DeadReckonedPose::default(),
             distance_m: 0.0,
             time_ns: None,
+            calibration: None,
         }
+    }
+
+    /// Calibrates the heading online from the fixes passed to [`Odometry::fix_heading`]
+    /// (`cfg.enabled`; off otherwise).
+    pub fn with_calibration(mut self, cfg: CalibrationConfig) -> Self {
+        self.calibration = cfg.enabled.then(|| HeadingCalibration::new(cfg));
+        self
+    }
+
+    /// The frame ends (see [`HeadingCalibration::end_frame`]).
+    pub fn end_frame(&mut self, settled: bool) {
+        if let Some(c) = self.calibration.as_mut() {
+            c.end_frame(settled);
+        }
+    }
+
+    /// The calibration, when on.
+    pub fn calibration(&self) -> Option<&HeadingCalibration> {
+        self.calibration.as_ref()
     }
 
     /// Integrates up to `time_ns` (CLOCK_MONOTONIC; earlier times are ignored).
@@ -135,10 +159,14 @@ impl Odometry {
             let vr = self.right.step(dt, self.config.motor_tau_s);
             let v = 0.5 * (vl + vr);
             let w = (vr - vl) / self.config.track_m;
-            let mid = self.pose.heading_rad + 0.5 * w * dt;
+            let dh = match self.calibration.as_mut() {
+                Some(c) => c.heading_step(w * dt, v * dt, vl * vr < 0.0),
+                None => w * dt,
+            };
+            let mid = self.pose.heading_rad + 0.5 * dh;
             self.pose.x_m += v * dt * mid.cos();
             self.pose.y_m += v * dt * mid.sin();
-            self.pose.heading_rad += w * dt;
+            self.pose.heading_rad += dh;
             self.distance_m += v.abs() * dt;
         }
         self.time_ns = Some(time_ns);
@@ -156,9 +184,22 @@ impl Odometry {
         self.pose
     }
 
-    /// Turns the heading estimate by `delta_rad` (a fix from the walls' directions).
+    /// Turns the heading estimate by `delta_rad`, a measured fix (the walls' directions, the
+    /// scan aligned to the grid): the calibration learns from it.
+    pub fn fix_heading(&mut self, delta_rad: f64) {
+        self.pose.heading_rad += delta_rad;
+        if let Some(c) = self.calibration.as_mut() {
+            c.observe_fix(delta_rad);
+        }
+    }
+
+    /// Turns the heading estimate by `delta_rad`, a pose put back (motion integrated that
+    /// did not happen): the calibration leaves the motion since the last fix out.
     pub fn correct_heading(&mut self, delta_rad: f64) {
         self.pose.heading_rad += delta_rad;
+        if let Some(c) = self.calibration.as_mut() {
+            c.discard_interval();
+        }
     }
 
     /// Moves the pose estimate by `(dx_m, dy_m)` (a fix from aligning a scan to the map).

@@ -44,7 +44,7 @@ use grid::OccupancyGrid;
 use planner::CostField;
 use recovery::{ProgressChecker, Recovery, RecoveryInput};
 use redraw::{BlindArc, GridEdit, RedrawLog, RedrawStep};
-pub use scan_match::PoseCorrection;
+pub use scan_match::{CorrectionKind, PoseCorrection};
 use stall::StallCheck;
 
 /// The goal being driven to and the path there.
@@ -322,6 +322,7 @@ impl Explorer {
                 dy_m: back.y_m - pose.y_m,
                 dheading_rad: back.heading_rad - pose.heading_rad,
                 overlap: 0.0,
+                kind: CorrectionKind::PutBack,
             });
         }
         // With the heading search or the re-drawing after blind turns on, every scan counts
@@ -356,6 +357,7 @@ impl Explorer {
                 dy_m: g * fix.dy_m,
                 dheading_rad: g * fix.dheading_rad,
                 overlap: fix.overlap,
+                kind: CorrectionKind::Aligned,
             });
         // The position is refined from where the search put the pose.
         let mut fix = searched.unwrap_or_default();
@@ -428,6 +430,7 @@ impl Explorer {
                     dy_m,
                     dheading_rad,
                     overlap: 0.0,
+                    kind: CorrectionKind::PutBack,
                 })
             }
         }

@@ -24,6 +24,19 @@ pub struct PoseCorrection {
     pub dheading_rad: f64,
     /// Share of the points on occupied cells at the corrected pose.
     pub overlap: f64,
+    /// What the correction is.
+    pub kind: CorrectionKind,
+}
+
+/// Where a [`PoseCorrection`] comes from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum CorrectionKind {
+    /// The scan aligned to the grid: a measurement of dead reckoning's error.
+    #[default]
+    Aligned,
+    /// Motion dead reckoning integrated that did not happen, taken back (a stall), or the
+    /// grid re-drawn after a blind turn: not a measurement of the wheels' errors.
+    PutBack,
 }
 
 fn score(grid: &OccupancyGrid, pose: &DeadReckonedPose, points: &[(f64, f64)]) -> (f64, usize) {
@@ -87,6 +100,7 @@ fn best_fit(
         dy_m: dy,
         dheading_rad: dth,
         overlap,
+        kind: CorrectionKind::Aligned,
     })
 }
 

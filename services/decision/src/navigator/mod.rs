@@ -4,6 +4,7 @@
 //! it asks the local map (is a side open, where does an opening end, how far is the wall).
 
 use super::*;
+use crate::explore::CorrectionKind;
 
 mod fuzzy;
 mod openings;
@@ -301,6 +302,7 @@ impl Navigator {
     pub fn with_nav(mut self, nav: &NavConfig, robot: &RobotConfig, pulses: &PulseTable) -> Self {
         if let Some(old) = &self.explorer {
             let first_bin = old.grid().first_bin();
+            self.odometry = Odometry::new(*robot, pulses).with_calibration(nav.calibration);
             let mut e = crate::explore::Explorer::new(*nav, robot, pulses, self.camera_forward_m);
             e.set_first_bin(first_bin);
             self.explorer = Some(Box::new(e));
@@ -346,7 +348,7 @@ impl Navigator {
         if let Some(e) = &self.explorer {
             let s = e.status();
             return format!(
-                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}{}{}{}",
+                "explore goal {} plans {} frontiers {} blacklisted {} recoveries {} fixes {} ({} position) stalls {} tight {}{}{}{}{}{}{}",
                 e.goal_m()
                     .map_or("-".to_string(), |g| format!("({:.2},{:.2})", g.0, g.1)),
                 s.plans,
@@ -374,6 +376,13 @@ impl Navigator {
                 },
                 if e.recovering() { " recovering" } else { "" },
                 if s.done { " done" } else { "" },
+                self.odometry
+                    .calibration()
+                    .map_or(String::new(), |c| format!(
+                        " calibrated {:.3} {:.3}",
+                        c.loss_share(),
+                        c.drift_rad_per_m()
+                    )),
             );
         }
         format!(
@@ -452,7 +461,7 @@ impl Navigator {
             let error = (-a - heading + 0.5 * q).rem_euclid(q) - 0.5 * q;
             if error.abs() < HEADING_FIX_MAX_RAD {
                 let fix = self.cfg.heading_fix_gain * error;
-                self.odometry.correct_heading(fix);
+                self.odometry.fix_heading(fix);
                 if let Some(e) = self.explorer.as_mut() {
                     e.corrected(0.0, 0.0, fix);
                 }
@@ -467,8 +476,14 @@ impl Navigator {
             )
         {
             self.odometry.correct_position(fix.dx_m, fix.dy_m);
-            self.odometry.correct_heading(fix.dheading_rad);
+            match fix.kind {
+                CorrectionKind::Aligned => self.odometry.fix_heading(fix.dheading_rad),
+                CorrectionKind::PutBack => self.odometry.correct_heading(fix.dheading_rad),
+            }
         }
+        self.odometry.end_frame(
+            front_seen && self.odometry.turn_rate_rad_s().abs() < HEADING_FIX_MAX_TURN_RAD_S,
+        );
         let pose = self.odometry.pose();
         // The exploring navigator keeps its own grid: the local map is the other policies'
         // (filling it cost a tenth of a millisecond a frame for nothing).

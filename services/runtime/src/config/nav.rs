@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::Invalid;
 
 /// Checks that each `(key, value, lo, hi)` lies in `lo..=hi`, naming the first that does not.
-fn check_ranges(prefix: &str, checks: &[(&str, f64, f64, f64)]) -> Result<(), Invalid> {
+pub(super) fn check_ranges(prefix: &str, checks: &[(&str, f64, f64, f64)]) -> Result<(), Invalid> {
     for &(key, value, lo, hi) in checks {
         if !(lo..=hi).contains(&value) {
             return Err(Invalid::new(
@@ -880,6 +880,8 @@ pub struct NavConfig {
     pub stall: StallConfig,
     /// Re-drawing the grid after a heading found wrong.
     pub redraw: RedrawConfig,
+    /// Dead reckoning's heading calibrated from the heading fixes.
+    pub calibration: super::CalibrationConfig,
 }
 
 impl NavConfig {
@@ -894,6 +896,7 @@ impl NavConfig {
         self.recovery.validate()?;
         self.stall.validate()?;
         self.redraw.validate()?;
+        self.calibration.validate()?;
         let f = &self.frontier;
         if f.min_view_m > f.view_m {
             return Err(Invalid::new(

@@ -209,4 +209,20 @@ fn the_nav_section_parses_and_a_bad_value_is_named_with_its_table() {
         .to_string();
     assert!(err.contains("nav.frontier.replan_s"), "{err}");
     assert!(err.contains("/nonexistent/test.toml"), "{err}");
+    // The calibration's table lives in a file of its own and is checked the same way.
+    let c = parse(
+        "[nav.calibration]
+enabled = true
+",
+    )
+    .expect("calibration on");
+    assert!(c.nav.calibration.enabled);
+    let err = parse(
+        "[nav.calibration]
+forget_factor = 1.5
+",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("nav.calibration.forget_factor"), "{err}");
 }
