@@ -27,6 +27,8 @@ pub struct HeadingCalibration {
     fixed_rad: f64,
     /// Fixes applied this frame, radians.
     frame_fixed_rad: f64,
+    /// A fix (of any size) was made this frame: the heading was measured.
+    frame_measured: bool,
     /// Weighted sums of the turning and driving the samples in the fit span.
     abs_turned_rad: f64,
     abs_driven_m: f64,
@@ -71,16 +73,21 @@ impl HeadingCalibration {
     pub fn observe_fix(&mut self, delta_rad: f64) {
         self.fixed_rad += delta_rad;
         self.frame_fixed_rad += delta_rad;
+        self.frame_measured = true;
     }
 
     /// The frame ends; `settled`: the heading could be fixed this frame (the walls in view,
     /// not turning fast). A fix takes back only a share of the error it finds and the rest
-    /// comes in the next frames, so a sample closes only at a settled frame whose fixes were
-    /// below `quiet_rad` (the error made over the sample then taken back) once the motion
-    /// since it began reaches `sample_turned_rad` or `sample_driven_m`.
+    /// comes in the next frames, so a sample closes only at a settled frame that measured the
+    /// heading (a fix was made) and whose fixes were below `quiet_rad` (the error made over
+    /// the sample then taken back), once the motion since it began reaches
+    /// `sample_turned_rad` or `sample_driven_m`. A sample whose error exceeds what the limits
+    /// allow (`max_turn_loss_share`, `max_drift_rad_per_m`, plus `quiet_rad`) is dropped: a
+    /// turn held by a wall and found only later is not a wheel's error.
     pub fn end_frame(&mut self, settled: bool) {
-        let quiet = self.frame_fixed_rad.abs() < self.cfg.quiet_rad;
+        let quiet = self.frame_measured && self.frame_fixed_rad.abs() < self.cfg.quiet_rad;
         self.frame_fixed_rad = 0.0;
+        self.frame_measured = false;
         if !settled
             || !quiet
             || (self.turned_rad.abs() < self.cfg.sample_turned_rad
@@ -91,6 +98,13 @@ impl HeadingCalibration {
         let true_rad = self.applied_rad + self.fixed_rad;
         let y = self.turned_rad + self.other_rad - true_rad;
         let (t, d) = (self.turned_rad, -self.driven_m);
+        let limit = self.cfg.max_turn_loss_share * t.abs()
+            + self.cfg.max_drift_rad_per_m * d.abs()
+            + self.cfg.quiet_rad;
+        if y.abs() > limit {
+            self.discard_interval();
+            return;
+        }
         let l = self.cfg.forget_factor;
         self.stt = l * self.stt + t * t;
         self.std = l * self.std + t * d;
@@ -112,6 +126,7 @@ impl HeadingCalibration {
         self.applied_rad = 0.0;
         self.fixed_rad = 0.0;
         self.frame_fixed_rad = 0.0;
+        self.frame_measured = false;
     }
 
     /// The share of a turn in place the body is found to lose.
@@ -134,9 +149,16 @@ impl HeadingCalibration {
                 (self.stt * self.sdy - self.std * self.sty) / det,
             )
         } else if turned {
-            (self.sty / self.stt, self.drift_rad_per_m)
+            // The other term at its current value.
+            (
+                (self.sty - self.drift_rad_per_m * self.std) / self.stt,
+                self.drift_rad_per_m,
+            )
         } else if driven {
-            (self.loss_share, self.sdy / self.sdd)
+            (
+                self.loss_share,
+                (self.sdy - self.loss_share * self.std) / self.sdd,
+            )
         } else {
             return;
         };
@@ -221,16 +243,36 @@ mod tests {
             max_drift_rad_per_m: 0.03,
             ..on()
         });
+        // Errors beyond the limits are not taken for the wheels': the fit stays within them.
         learn(&mut cal, 0.1, 0.1, 0.5, 100);
-        assert_eq!((cal.loss_share(), cal.drift_rad_per_m()), (0.02, 0.03));
-        // A put-back drops the motion since the last fix: a turn that never happened and is
-        // put back teaches nothing.
+        assert!(cal.loss_share().abs() <= 0.02, "{}", cal.loss_share());
+        assert!(
+            cal.drift_rad_per_m().abs() <= 0.03,
+            "{}",
+            cal.drift_rad_per_m()
+        );
+        // A put-back drops the motion since the sample began: turns that never happened,
+        // taken back by the pose put back (not a fix), teach nothing, and the loss learnt
+        // stays.
         let mut cal = HeadingCalibration::new(on());
+        learn(&mut cal, 0.1, 0.0, 0.5, 100);
+        let learnt = cal.loss_share();
+        assert!((learnt - 0.1).abs() < 0.01, "{learnt}");
         for _ in 0..50 {
-            cal.heading_step(1.0, 0.0, true);
+            let turned = cal.heading_step(1.0, 0.0, true);
+            // Put back by `turned`: the pose, not the calibration, takes it.
+            let _ = turned;
             cal.discard_interval();
+            cal.observe_fix(0.0);
             cal.end_frame(true);
         }
-        assert_eq!(cal.loss_share(), 0.0);
+        assert_eq!(cal.loss_share(), learnt);
+        // A sample whose error is beyond the limits (a held turn found late) is dropped.
+        cal.heading_step(1.0, 0.0, true);
+        cal.observe_fix(-0.9);
+        cal.end_frame(true);
+        cal.observe_fix(0.0);
+        cal.end_frame(true);
+        assert_eq!(cal.loss_share(), learnt);
     }
 }

@@ -83,12 +83,15 @@ struct HiSide {
 }
 
 impl HiSide {
-    /// Forgets the results and the last map id of an old frame numbering: the capture
-    /// restarted, so frame ids start again and a replayed frame's named result, or whether
-    /// it may still come, must be judged in the new numbering.
+    /// Forgets the last map id of an old frame numbering (the results went with
+    /// [`HiResults::follow_numbering`]): the capture restarted, so frame ids start again and
+    /// whether a replayed frame's named result may still come is judged in the new numbering.
+    /// A map of the new numbering that came before its frame keeps its id.
     fn restart(&mut self) {
-        self.results.clear();
-        self.last_map_id = None;
+        let newest = self.held.newest_id();
+        self.last_map_id = self
+            .last_map_id
+            .filter(|&id| newest.is_some_and(|n| id <= n));
     }
 
     /// Computes the ranges of every map whose frame is here (in the order they came; each
@@ -162,7 +165,6 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
     };
     let mut ranges = rt.node.publisher(&topics::RANGES)?;
     let mut held_lo = HeldFrames::new(HELD_FRAMES, frame_id);
-    let mut lo_numbering = held_lo.numbering();
     let mut waiting_lo = WaitingMaps::new(WAITING_MAPS, frame_id);
     let mut lo_path = FusionPath::new(&rt.config, 320, 240, RangeSource::Lo);
     let hi_max_age_ns = rt.config.fusion.hi_max_age_ms * 1_000_000;
@@ -186,11 +188,6 @@ fn run(rt: &mut StageRuntime) -> Result<(), StageError> {
         disp_lo.clear_events();
         loop {
             hold_frames(&frames_lo, &mut held_lo)?;
-            if held_lo.numbering() != lo_numbering {
-                // The capture restarted: its 640x480 frames are numbered again too.
-                lo_numbering = held_lo.numbering();
-                hi.restart();
-            }
             let received = disp_lo.receive()?;
             let more = received.is_some();
             if let Some(map) = received {

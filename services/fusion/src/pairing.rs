@@ -51,6 +51,11 @@ impl<T> HeldFrames<T> {
         self.items.push_back(item);
     }
 
+    /// The id of the newest item pushed, if any.
+    pub fn newest_id(&self) -> Option<u64> {
+        self.newest_id
+    }
+
     /// How many times the frame ids started again since the start.
     pub fn numbering(&self) -> u64 {
         self.numbering
@@ -255,12 +260,6 @@ impl<R> HiResults<R> {
         self.numbering = numbering;
         self.results.clear();
         true
-    }
-
-    /// Drops every result (the 320x240 frames' ids started again: the capture restarted,
-    /// and its 640x480 frames will too).
-    pub fn clear(&mut self) {
-        self.results.clear();
     }
 
     /// Adds the newest result, dropping the oldest when full.
@@ -481,7 +480,6 @@ mod tests {
             hi.choose(HiWanted::Named(1), 0, 0).map(|h| h.result),
             Some(1)
         );
-        hi.clear();
-        assert!(hi.find(1).is_none());
+        assert_eq!(frames.newest_id(), Some(1));
     }
 }

@@ -506,7 +506,7 @@ mod tests {
         assert!(!occupied(&grid, edge_m - 0.5 * cell_m));
         assert!(!occupied(&grid, edge_m - 2.5 * cell_m));
         assert!(occupied(&grid, edge_m - 3.5 * cell_m));
-        // Wholly off the grid: nothing goes (the clipped range must not wrap to cell 0).
+        // Wholly off the grid: nothing goes.
         whole(&mut grid);
         grid.forget_disc((-edge_m - 2.0, -edge_m - 2.0), 0.5, 0.0);
         grid.forget_disc((edge_m + 2.0, edge_m + 2.0), 0.5, 0.0);

@@ -472,7 +472,9 @@ impl Explorer {
         if turned.abs() < cfg.reacquire_turn_deg.to_radians() {
             return None;
         }
-        let fix = scan_match::align_over_arc(&self.grid, pose, points, cfg, turned)?;
+        let mut fix = scan_match::align_over_arc(&self.grid, pose, points, cfg, turned)?;
+        // A turn held by a wall, found after it: not a measure of the wheels' errors.
+        fix.kind = CorrectionKind::PutBack;
         self.status.reacquired += 1;
         self.status.scan_fixes += 1;
         self.stall.shift(fix.dx_m, fix.dy_m, fix.dheading_rad);

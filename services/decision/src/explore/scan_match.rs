@@ -34,8 +34,9 @@ pub enum CorrectionKind {
     /// The scan aligned to the grid: a measurement of dead reckoning's error.
     #[default]
     Aligned,
-    /// Motion dead reckoning integrated that did not happen, taken back (a stall), or the
-    /// grid re-drawn after a blind turn: not a measurement of the wheels' errors.
+    /// Motion dead reckoning integrated that did not happen, taken back (a stall), the
+    /// heading re-found after a blind turn, or the grid re-drawn after one: not a
+    /// measurement of the wheels' errors.
     PutBack,
 }
 
