@@ -4,24 +4,24 @@
 //! wheel speeds say. Two wheels of slightly different size or motor gain turn it while it
 //! drives straight. Both errors are systematic, so the heading fixes (the walls' directions,
 //! the scan aligned to the grid) that keep pulling the heading back say how large they are:
-//! each fix is set against the turning in place and the driving integrated since the
-//! previous one, and a least-squares fit with forgetting gives the share of a turn in place
+//! the fixes are set against the turning in place and the driving integrated since a sample
+//! began, and a least-squares fit with forgetting gives the share of a turn in place
 //! the body loses and the heading it gains per metre driven. Written by hand: it is a
 //! two-parameter recursive least squares over a few sums.
 
 use hvs_runtime::config::CalibrationConfig;
 
-/// The learnt corrections and the motion since the last heading fix.
+/// The learnt corrections and the motion since the sample began.
 #[derive(Debug, Clone, Default)]
 pub struct HeadingCalibration {
     cfg: CalibrationConfig,
-    /// Turning in place integrated from the wheel speeds since the last fix, radians.
+    /// Turning in place integrated from the wheel speeds since the sample began, radians.
     turned_rad: f64,
     /// Any other turning integrated from the wheel speeds (arcs), radians.
     other_rad: f64,
-    /// Driving (signed: backwards negative) since the last fix, metres.
+    /// Driving (signed: backwards negative) since the sample began, metres.
     driven_m: f64,
-    /// Heading change the calibrated integration applied since the last fix, radians.
+    /// Heading change the calibrated integration applied since the sample began, radians.
     applied_rad: f64,
     /// Fixes applied since the sample began, radians.
     fixed_rad: f64,
@@ -259,9 +259,8 @@ mod tests {
         let learnt = cal.loss_share();
         assert!((learnt - 0.1).abs() < 0.01, "{learnt}");
         for _ in 0..50 {
-            let turned = cal.heading_step(1.0, 0.0, true);
-            // Put back by `turned`: the pose, not the calibration, takes it.
-            let _ = turned;
+            // Put back: the pose takes the turn back, the calibration drops it.
+            cal.heading_step(1.0, 0.0, true);
             cal.discard_interval();
             cal.observe_fix(0.0);
             cal.end_frame(true);

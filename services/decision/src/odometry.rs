@@ -194,7 +194,7 @@ impl Odometry {
     }
 
     /// Turns the heading estimate by `delta_rad`, a pose put back (motion integrated that
-    /// did not happen): the calibration leaves the motion since the last fix out.
+    /// did not happen): the calibration leaves the motion since its sample began out.
     pub fn correct_heading(&mut self, delta_rad: f64) {
         self.pose.heading_rad += delta_rad;
         if let Some(c) = self.calibration.as_mut() {

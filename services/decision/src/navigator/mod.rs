@@ -446,12 +446,14 @@ impl Navigator {
         // wall closer than the matcher's shortest range, the few points left are noise
         // (measured: a 19 degree wrong fix while standing at a dead end's wall).
         let sides = SideRanges::from_windows(windows, window_count);
-        let front_seen = sides.middle_m.is_some();
+        // The heading can be fixed this frame: the front seen, not turning fast (the turn
+        // rate is the wheels', which no fix below changes).
+        let settled = sides.middle_m.is_some()
+            && self.odometry.turn_rate_rad_s().abs() < HEADING_FIX_MAX_TURN_RAD_S;
         if (self.cfg.local_map || self.explorer.is_some())
             && self.cfg.heading_fix_gain > 0.0
             && self.cfg.snap_turn_deg == 90.0
-            && self.odometry.turn_rate_rad_s().abs() < HEADING_FIX_MAX_TURN_RAD_S
-            && front_seen
+            && settled
             && let Some(a) = wall_direction(scan, MAP_RANGE_M, HEADING_FIX_VOTES)
         {
             // The walls run at a (mod 90 degrees) in the robot's frame: the heading is -a
@@ -481,9 +483,7 @@ impl Navigator {
                 CorrectionKind::PutBack => self.odometry.correct_heading(fix.dheading_rad),
             }
         }
-        self.odometry.end_frame(
-            front_seen && self.odometry.turn_rate_rad_s().abs() < HEADING_FIX_MAX_TURN_RAD_S,
-        );
+        self.odometry.end_frame(settled);
         let pose = self.odometry.pose();
         // The exploring navigator keeps its own grid: the local map is the other policies'
         // (filling it cost a tenth of a millisecond a frame for nothing).

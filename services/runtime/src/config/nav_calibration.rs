@@ -6,9 +6,9 @@ use serde::{Deserialize, Serialize};
 
 use super::Invalid;
 
-/// Online calibration of dead reckoning's heading (`[nav.calibration]`): each heading fix
-/// (the walls' directions, the scan aligned to the grid) is set against the turning in place
-/// and the driving dead reckoning integrated since the previous fix, and a least-squares fit
+/// Online calibration of dead reckoning's heading (`[nav.calibration]`): the heading fixes
+/// (the walls' directions, the scan aligned to the grid) over a sample are set against the
+/// turning in place and the driving dead reckoning integrated over it, and a least-squares fit
 /// with forgetting gives the share of each turn in place that the body loses and the heading
 /// the body gains per metre driven; both are then applied to the integration.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
